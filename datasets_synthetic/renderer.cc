@@ -394,7 +394,6 @@ Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light
   CheckCamera(rig, camera_index);
   const RigCamera& cam = rig.cameras[camera_index];
   const int n = std::max(1, samples_per_axis);
-  const double cos_emitter = std::cos(DegToRad(light.emitter_radius));
   // What the chrome mirrors of the dark room: the ambient light seen through a 60 % mirror.
   constexpr double kChromeReflectance = 0.6;
   const double room = kChromeReflectance * rig.exposure_s * rig.ambient_irradiance / kPi;
@@ -415,18 +414,8 @@ Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light
       for (int col = 0; col < cam.width; ++col) {
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         ForEachSubRay(cam, col, static_cast<int>(row), n, [&](const Eigen::Vector3d& d) {
-          const double t = hit_sphere(cam.position_mm, d, center, radius_mm);
-          if (t > 0) {
-            const Eigen::Vector3d p = cam.position_mm + t * d;
-            const Eigen::Vector3d normal = (p - center) / radius_mm;
-            const Eigen::Vector3d r = d - 2.0 * d.dot(normal) * normal;
-            bool sees_emitter;
-            if (light.type == RigLightType::kDirectional) {
-              sees_emitter = r.dot(light.direction) >= cos_emitter;
-            } else {
-              sees_emitter = hit_sphere(p, r, light.position_mm, light.emitter_radius) > 0;
-            }
-            sum += Eigen::Vector3d::Constant(sees_emitter ? highlight_level : room);
+          if (hit_sphere(cam.position_mm, d, center, radius_mm) > 0) {
+            sum += Eigen::Vector3d::Constant(room);
             return;
           }
           if (!(d.z() < 0)) return;
@@ -442,6 +431,41 @@ Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light
       }
     }
   });
+
+  // The mirrored emitter: a highlight of a few pixels at most, far smaller than a pixel for small
+  // emitters, so it is drawn as what the lens makes of it: a Gaussian spot (peak highlight_level)
+  // centred on the exact image of the reflection point, where the sphere normal bisects the
+  // directions to the light and to the camera (fixed-point iteration; converges in a few steps).
+  Eigen::Vector3d normal = (cam.position_mm - center).normalized();
+  Eigen::Vector3d point = center + radius_mm * normal;
+  for (int it = 0; it < 100; ++it) {
+    const Eigen::Vector3d to_light =
+        light.type == RigLightType::kDirectional ? light.direction : Eigen::Vector3d((light.position_mm - point).normalized());
+    const Eigen::Vector3d next = (to_light + (cam.position_mm - point).normalized()).normalized();
+    const double change = (next - normal).norm();
+    normal = next;
+    point = center + radius_mm * normal;
+    if (change < 1e-13) break;
+  }
+  Eigen::Vector2d spot;
+  if (!ProjectToPixel(cam, point, &spot)) return out;
+  // Angular size of the emitter -> size of its image on the sphere (normal turns by half the angle).
+  const double emitter_rad = light.type == RigLightType::kDirectional
+                                 ? DegToRad(light.emitter_radius)
+                                 : light.emitter_radius / (light.position_mm - point).norm();
+  const double mm_per_px = (cam.position_mm - point).norm() / cam.fx;
+  constexpr double kMinSpotSigmaPx = 0.8;  // a sharp lens's blur
+  const double sigma = std::max(kMinSpotSigmaPx, 0.5 * radius_mm * 0.5 * emitter_rad / mm_per_px);
+  const int reach = static_cast<int>(std::ceil(4 * sigma));
+  const int c0 = std::max(0, static_cast<int>(spot.x()) - reach), c1 = std::min(cam.width - 1, static_cast<int>(spot.x()) + reach + 1);
+  const int r0 = std::max(0, static_cast<int>(spot.y()) - reach), r1 = std::min(cam.height - 1, static_cast<int>(spot.y()) + reach + 1);
+  for (int r = r0; r <= r1; ++r) {
+    for (int c = c0; c <= c1; ++c) {
+      const double d2 = (c - spot.x()) * (c - spot.x()) + (r - spot.y()) * (r - spot.y());
+      const double value = highlight_level * std::exp(-0.5 * d2 / (sigma * sigma));
+      for (int ch = 0; ch < 3; ++ch) out.at(ch, r, c) += static_cast<float>(value);
+    }
+  }
   return out;
 }
 

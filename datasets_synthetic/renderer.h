@@ -83,9 +83,12 @@ Image RenderPlaneTarget(const Rig& rig, int camera_index, const PlaneTarget& tar
                         bool with_ambient, int samples_per_axis, const RenderOptions& options = {});
 
 // A chrome sphere of `radius_mm` centred at `center_mm` (resting on z = 0 when center z = radius)
-// under one light: the emitter (RigLight::emitter_radius) is seen mirrored at value
-// `highlight_level`; elsewhere the sphere mirrors a dark room, and the table around it is lit by the
-// light. Supersampled like RenderPlaneTarget.
+// under one light. The sphere mirrors a dark room (the ambient light); the table around it is lit
+// by the light and shadowed by the sphere. The mirrored emitter is a Gaussian spot of peak
+// `highlight_level` centred exactly on the image of the reflection point (where the sphere normal
+// bisects the directions to light and camera), sigma from the emitter's angular size, at least
+// 0.8 px: a highlight much smaller than a pixel, as a lens would blur it, with an unbiased centroid.
+// Supersampled like RenderPlaneTarget.
 Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light, const Eigen::Vector3d& center_mm,
                          double radius_mm, double highlight_level, int samples_per_axis,
                          const RenderOptions& options = {});
