@@ -181,7 +181,17 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   if (cv::countNonZero(disc) == 0 || !(peak > 4.0 * disc_mean[0]) || !(peak > 0.0)) {
     throw InputError(frame_file, "", what + "; the sphere shows no highlight well above its mean");
   }
-  const float threshold = static_cast<float>(0.5 * peak);
+  // Weights above the sphere's typical (median) value, over the blob down to 5 % of the peak: a
+  // highlight smaller than a pixel still has a sub-pixel centroid through its partial coverage.
+  std::vector<float> inside;
+  for (int row = 0; row < grey.rows; ++row) {
+    for (int col = 0; col < grey.cols; ++col) {
+      if (disc.at<unsigned char>(row, col)) inside.push_back(grey.at<float>(row, col));
+    }
+  }
+  std::nth_element(inside.begin(), inside.begin() + inside.size() / 2, inside.end());
+  const double background = inside[inside.size() / 2];
+  const float threshold = static_cast<float>(background + 0.05 * (peak - background));
   cv::Mat bright = (grey >= threshold) & disc;
   cv::Mat labels;
   cv::connectedComponents(bright, labels, 8, CV_32S);
@@ -192,7 +202,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
     const float* g = grey.ptr<float>(row);
     for (int col = 0; col < grey.cols; ++col) {
       if (l[col] != label) continue;
-      const double w = g[col] - threshold;
+      const double w = g[col] - background;
       sum_w += w, sum_x += w * col, sum_y += w * row;
     }
   }
