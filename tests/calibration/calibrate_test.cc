@@ -32,7 +32,7 @@ struct TinyCapture {
   std::map<std::size_t, Image> frames;
   Eigen::Vector3d light_directions[2] = {Direction(45.0, 30.0), Direction(60.0, 200.0)};
 
-  TinyCapture(bool with_chart = true, bool with_board = true) {
+  TinyCapture() {
     CameraSpec camera;
     camera.id = "top";
     camera.width = truth.width;
@@ -55,7 +55,7 @@ struct TinyCapture {
     Add({"dark.tif", "top", std::nullopt, "front", 0.5, FrameRole::kDark}, Image(320, 240, 3, 0.0f));
     Add({"ambient.tif", "top", std::nullopt, "front", 0.5, FrameRole::kAmbient},
         Image(320, 240, 3, static_cast<float>(kAmbientPerSecond * 0.5)));
-    if (with_board) Add({"board.tif", "top", std::nullopt, "front", 0.5, FrameRole::kBoard}, testing::RenderBoard(truth, *manifest.targets.board));
+    Add({"board.tif", "top", std::nullopt, "front", 0.5, FrameRole::kBoard}, testing::RenderBoard(truth, *manifest.targets.board));
     for (int l = 0; l < 2; ++l) {
       const std::string id = "L" + std::to_string(l + 1);
       Add({"sphere_" + id + ".tif", "top", id, "front", 0.5, FrameRole::kSphere},
@@ -64,9 +64,25 @@ struct TinyCapture {
       Add({"sample_" + id + ".tif", "top", id, "front", 0.5, FrameRole::kSample}, Lambertian(kFabricReflectance, l, 0.5),
           kAmbientPerSecond * 0.5);
     }
-    if (with_chart) {
-      Add({"chart.tif", "top", std::string("L1"), "front", 0.5, FrameRole::kChart}, Chart());
+    Add({"chart.tif", "top", std::string("L1"), "front", 0.5, FrameRole::kChart}, Chart());
+  }
+
+  // Rendering takes most of a test's time: every test starts from one shared capture.
+  static const TinyCapture& Shared() {
+    static const TinyCapture capture;
+    return capture;
+  }
+  void RemoveFrames(FrameRole role) {
+    Manifest kept = manifest;
+    kept.frames.clear();
+    std::map<std::size_t, Image> kept_frames;
+    for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
+      if (manifest.frames[i].role == role) continue;
+      kept_frames[kept.frames.size()] = frames.at(i);
+      kept.frames.push_back(manifest.frames[i]);
     }
+    manifest = std::move(kept);
+    frames = std::move(kept_frames);
   }
 
   Image Lambertian(double rho, int light, double exposure_s) const {
@@ -110,7 +126,7 @@ CalibrationOptions TestOptions() {
 }
 
 TEST(Calibrate, EveryStepRunsOnACompleteCaptureAndTheStackIsNormalised) {
-  TinyCapture capture;
+  const TinyCapture& capture = TinyCapture::Shared();
   const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), TestOptions());
   for (const auto& step : result.steps) std::cout << (step.ran ? "ran " : "skipped ") << step.step << ": " << step.detail << "\n";
   EXPECT_TRUE(result.warnings.empty()) << result.warnings.front();
@@ -155,7 +171,8 @@ TEST(Calibrate, EveryStepRunsOnACompleteCaptureAndTheStackIsNormalised) {
 }
 
 TEST(Calibrate, NoChartFramesSkipsColourWithAReason) {
-  TinyCapture capture(/*with_chart=*/false);
+  TinyCapture capture = TinyCapture::Shared();
+  capture.RemoveFrames(FrameRole::kChart);
   const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), TestOptions());
   EXPECT_FALSE(result.colour.fitted);
   bool found = false;
@@ -171,7 +188,8 @@ TEST(Calibrate, NoChartFramesSkipsColourWithAReason) {
 }
 
 TEST(Calibrate, CameraWithoutPoseAndWithoutBoardIsRefused) {
-  TinyCapture capture(true, /*with_board=*/false);
+  TinyCapture capture = TinyCapture::Shared();
+  capture.RemoveFrames(FrameRole::kBoard);
   try {
     Calibrate(capture.manifest, capture.Loader(), TestOptions(), {}, "scan/capture.json");
     FAIL() << "expected InputError";
@@ -182,7 +200,7 @@ TEST(Calibrate, CameraWithoutPoseAndWithoutBoardIsRefused) {
 }
 
 TEST(Calibrate, BoardNotFoundRefusesACameraWithoutPoseAndNamesTheFrame) {
-  TinyCapture capture;
+  TinyCapture capture = TinyCapture::Shared();
   for (auto& [index, image] : capture.frames) {
     if (capture.manifest.frames[index].role == FrameRole::kBoard) image = Image(320, 240, 3, 0.3f);
   }
@@ -195,7 +213,7 @@ TEST(Calibrate, BoardNotFoundRefusesACameraWithoutPoseAndNamesTheFrame) {
 }
 
 TEST(Calibrate, BadSphereAndFlatFallBackWithMessagesNamingTheFrames) {
-  TinyCapture capture;
+  TinyCapture capture = TinyCapture::Shared();
   capture.manifest.cameras[0].pose = CameraPose{capture.truth.pose.rotation, capture.truth.pose.translation_mm};
   for (auto& [index, image] : capture.frames) {
     const FrameSpec& spec = capture.manifest.frames[index];
