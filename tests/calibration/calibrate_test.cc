@@ -2,13 +2,17 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <iostream>
+#include <unistd.h>
 #include <map>
 
+#include "capture/capture.h"
 #include "capture/colour_calibration.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "synthetic_views.h"
+#include "u3m/image_io.h"
 
 namespace u3mscan {
 namespace {
@@ -230,6 +234,34 @@ TEST(Calibrate, BadSphereAndFlatFallBackWithMessagesNamingTheFrames) {
   EXPECT_EQ(result.FindFlat("top", "L1", "front"), nullptr);
   EXPECT_NE(result.FindFlat("top", "L2", "front"), nullptr);
   EXPECT_EQ(result.cameras[0].pose_source, "manifest");
+}
+
+TEST(Calibrate, CaptureFolderOnDiskGivesTheSameCalibration) {
+  // The Capture overloads (what `u3mscan calibrate` runs): frames as float EXR, the manifest
+  // written by WriteManifest, read back by Capture::Open.
+  const TinyCapture& memory = TinyCapture::Shared();
+  const auto dir = std::filesystem::temp_directory_path() / ("u3mscan_calibration_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  Manifest manifest = memory.manifest;
+  manifest.sample.name = "white card";
+  for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
+    auto& spec = manifest.frames[i];
+    spec.file = "frames/" + spec.file.substr(0, spec.file.size() - 4) + ".exr";
+    std::filesystem::create_directories(dir / "frames");
+    WriteImageFile(memory.frames.at(i), dir / spec.file, {SampleFormat::kFloat32, PixelEncoding::kLinear, 0.0});
+  }
+  WriteManifest(manifest, dir);
+  const Capture capture = Capture::Open(dir);
+  const CalibrationResult from_disk = Calibrate(capture, TestOptions());
+  const CalibrationResult from_memory = Calibrate(memory.manifest, memory.Loader(), TestOptions());
+  ASSERT_EQ(from_disk.lights.size(), 2u);
+  for (int l = 0; l < 2; ++l) {
+    EXPECT_LT((from_disk.lights[l].model.direction_in_world - from_memory.lights[l].model.direction_in_world).norm(), 1e-6);
+  }
+  EXPECT_EQ(from_disk.grid.width, from_memory.grid.width);
+  const Stack stack = BuildStack(capture, from_disk, TestOptions());
+  EXPECT_EQ(stack.observations.size(), 2u);
+  if (!std::getenv("U3MSCAN_KEEP_TEST_CAPTURE")) std::filesystem::remove_all(dir);
 }
 
 }  // namespace
