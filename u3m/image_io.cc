@@ -166,6 +166,9 @@ void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOp
     spec.attribute("ResolutionUnit", "in");
   }
   if (ext == ".exr" || ext == ".tif" || ext == ".tiff") spec.attribute("compression", "zip");
+  // Maps hold straight (unassociated) alpha, as PNG and U3M expect; without this OIIO would divide
+  // the colour by alpha on the way out.
+  spec.attribute("oiio:UnassociatedAlpha", 1);
 
   std::vector<std::uint8_t> bytes8;
   std::vector<std::uint16_t> bytes16;
@@ -202,14 +205,23 @@ void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOp
   }
 }
 
+namespace {
+// Opens with straight alpha kept as stored (OIIO would otherwise premultiply PNG and TIFF alpha).
+std::unique_ptr<oiio::ImageInput> OpenInput(const fs::path& path) {
+  oiio::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  return oiio::ImageInput::open(path.string(), &config);
+}
+}  // namespace
+
 ImageReadInfo ReadImageInfo(const fs::path& path) {
-  auto in = oiio::ImageInput::open(path.string());
+  auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
   return InfoFromSpec(in->spec(), path);
 }
 
 Image ReadImageFile(const fs::path& path, PixelEncoding encoding, ImageReadInfo* info_out) {
-  auto in = oiio::ImageInput::open(path.string());
+  auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
   const oiio::ImageSpec& spec = in->spec();
   const ImageReadInfo info = InfoFromSpec(spec, path);
