@@ -844,7 +844,9 @@ std::vector<ArchiveEntry> ParseArchive(std::span<const std::uint8_t> bytes, cons
 
 std::vector<ArchiveEntry> ReadArchive(const fs::path& path, const ArchiveLimits& limits,
                                       std::vector<std::string>* warnings) {
-  const std::uint64_t max_file = limits.max_total_bytes + kArchiveOverheadBytes;
+  const std::uint64_t max_file = limits.max_total_bytes > UINT64_MAX - kArchiveOverheadBytes
+                                     ? UINT64_MAX
+                                     : limits.max_total_bytes + kArchiveOverheadBytes;
   const std::vector<std::uint8_t> bytes = ReadWholeFile(path, max_file);
   return ParseArchive(bytes, path.string(), limits, warnings);
 }
