@@ -169,7 +169,8 @@ void CheckSide(const Visualization& side, const std::string& at, SchemaVersion v
   for (const NormalKey& key : NormalKeys()) {
     const NormalParam& p = side.*key.member;
     const std::string where = at + "/" + std::string(key.name);
-    if (v10 && p.used && (std::abs(p.constant.x) > 1e-6 || std::abs(p.constant.y) > 1e-6 || p.constant.z <= 0.0))
+    // With a texture the constant is only the texture's mean, which a 1.0 reader derives itself.
+    if (v10 && p.used && !p.texture && (std::abs(p.constant.x) > 1e-6 || std::abs(p.constant.y) > 1e-6 || p.constant.z <= 0.0))
       out.push_back(where + "/constant: 1.0 has no constant normal vector (only a flat (0,0,1) surface)");
     if (!v10 && (std::abs(p.constant.x) > 1.0 || std::abs(p.constant.y) > 1.0 || std::abs(p.constant.z) > 1.0))
       out.push_back(where + "/constant: components must be in -1..1");
