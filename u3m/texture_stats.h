@@ -22,3 +22,18 @@ Vec3 NormalTextureMean(const Image& image, double scale);
 double Blend(BlendMode mode, double i, double f);
 
 }  // namespace u3mscan
+
+namespace u3mscan {
+
+// How close a `constant` must be to its texture's mean (validation and writers): scalar values and
+// colour channels within kConstantTolerance + kConstantTolerance * |mean| (8-bit quantisation and
+// mode clamping stay well inside), normal components within kNormalConstantTolerance.
+inline constexpr double kConstantTolerance = 0.02;
+inline constexpr double kNormalConstantTolerance = 0.05;
+inline bool ConstantAgrees(double constant, double mean) {
+  const double limit = kConstantTolerance * (1.0 + (mean < 0 ? -mean : mean));
+  const double d = constant - mean;
+  return d <= limit && -d <= limit;
+}
+
+}  // namespace u3mscan
