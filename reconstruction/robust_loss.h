@@ -31,4 +31,9 @@ inline double RobustWeight(RobustLoss loss, double r, double sigma) {
 // 1.4826 * median absolute deviation estimates sigma of Gaussian noise.
 inline constexpr double kMadToSigma = 1.4826;
 
+// sigma of Gaussian noise from the q-quantile of |residual| (q = 0.5: the MAD rule): 1 / (sqrt(2)
+// erfinv(q)). A lower q looks only at the best-fitting observations, so a large share of outliers
+// (shadows plus highlights) does not inflate the scale.
+double QuantileToSigma(double q);
+
 }  // namespace u3mscan::reconstruction
