@@ -23,6 +23,8 @@ constexpr double kLumB = 0.1;
 constexpr double kMinLuminance = 1e-6;
 // Guards a weighted normal equation whose diagonal vanishes (no diffuse signal at all).
 constexpr double kTinyNormal = 1e-300;
+// A secant step is taken only when the slope estimate is not lost in rounding.
+constexpr double kTinySecant = 1e-12;
 // Below this squared residual the Cauchy factor is 1 to rounding; avoids 0/0.
 constexpr double kTinySquaredResidual = 1e-20;
 
@@ -72,15 +74,29 @@ T RobustFactor(const T& sq, const RobustLoss& loss) {
 template <typename T>
 Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observations, const PixelCostSettings& settings,
                         T* residuals, std::vector<T>& scratch) {
+  using std::abs;
   const std::size_t n = observations.size();
   scratch.resize(2 * n);
   T luminance = T(std::max(settings.luminance_start, kMinLuminance));
   Vec3<T> color = Vec3<T>::Zero();
   const int passes = std::max(1, settings.luminance_passes);
+  // Fixed point l = lum(C(l)) by the secant method on h(l) = lum(C(l)) - l (plain substitution
+  // for the second pass): converges superlinearly, where substitution alone contracts only by the
+  // ratio of tinted to diffuse signal per pass.
+  T previous_luminance = luminance;
+  T previous_h = T(0);
   for (int pass = 0; pass < passes; ++pass) {
     if (pass > 0) {
-      luminance = T(kLumR) * color(0) + T(kLumG) * color(1) + T(kLumB) * color(2);
-      if (luminance < T(kMinLuminance)) luminance = T(kMinLuminance);
+      const T g = T(kLumR) * color(0) + T(kLumG) * color(1) + T(kLumB) * color(2);
+      const T h = g - luminance;
+      T next = g;
+      if (pass > 1) {
+        const T dh = h - previous_h;
+        if (abs(dh) > T(kTinySecant) * abs(h) + T(kTinyNormal)) next = luminance - h * (luminance - previous_luminance) / dh;
+      }
+      previous_luminance = luminance;
+      previous_h = h;
+      luminance = next < T(kMinLuminance) ? T(kMinLuminance) : next;
     }
     // Probe colour of luminance l: its tint is (1/0.3, 0, 0), the tint of every colour of that
     // luminance scaled the same way, so f(probe) separates A (red minus green) from s (green).

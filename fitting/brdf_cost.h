@@ -13,8 +13,8 @@
 // (the tints use C / l): f(C) = A(l) C + s(l) (1,1,1) with scalars A and s per observation. One BRDF
 // evaluation with the probe colour (l / 0.3, 0, 0) (luminance l) gives both: its red channel is
 // A l / 0.3 + s, its green channel s. C then follows per channel by weighted linear least squares;
-// when a tint (specular_tint, sheen_tint) is in play, l = lum(C) is found by a few fixed-point
-// passes. With specular_tint = sheen_tint = 0 the model is linear in C and one pass is exact.
+// when a tint (specular_tint, sheen_tint) is in play, l = lum(C) is found by a few passes of a
+// secant iteration on l - lum(C(l)). With specular_tint = sheen_tint = 0 the model is linear in C and one pass is exact.
 //
 // Residuals: 3 per observation (linear RGB), each (prediction - measurement) * weight, weight =
 // 1 / sigma of the noise model (set by the caller). The robust loss rho is applied per observation
@@ -81,7 +81,7 @@ struct PixelCostSettings {
   RobustLoss loss;
   // Luminance of the base colour to start the fixed-point passes from (any positive guess).
   double luminance_start = 0.2;
-  // Fixed-point passes for l = lum(C); 1 is exact when no tint is in play.
+  // Passes (base-colour solves) for l = lum(C); 1 is exact when no tint is in play.
   int luminance_passes = 1;
 };
 

@@ -42,10 +42,23 @@ std::string Hint(FitParameter p, const ObservabilityContext& context) {
   return "";
 }
 
+double InformationScale(const ObservabilityContext& context, const ObservabilityOptions& options, int free_count) {
+  const double pixels = std::max(1, context.pixel_count);
+  const int dof = context.residual_count - free_count;
+  const double chi2 = dof > 0 ? 2.0 * context.cost / dof : 1.0;
+  return std::min(1.0, options.effective_pixels / pixels) / std::max(1.0, chi2);
+}
+
 }  // namespace
 
 bool ObservabilityOptions::Check() const {
-  return max_std > 0.0 && effective_pixels >= 1 && uniform_abs_tolerance >= 0.0 && uniform_sigma_factor >= 0.0;
+  return max_std > 0.0 && effective_pixels >= 1 && uniform_abs_tolerance >= 0.0 && uniform_sigma_factor >= 0.0 &&
+         default_rejection_chi2 >= 0.0;
+}
+
+double EffectiveChi2Increase(double cost_at_fit, double cost_at_default, const ObservabilityContext& context,
+                             const ObservabilityOptions& options) {
+  return 2.0 * (cost_at_default - cost_at_fit) * InformationScale(context, options, 0);
 }
 
 ParameterVector PosteriorStdDev(const Matrix7& fisher, const ParameterMask& free, const ObservabilityContext& context,
@@ -62,13 +75,9 @@ ParameterVector PosteriorStdDev(const Matrix7& fisher, const ParameterMask& free
   for (int a = 0; a < n; ++a) {
     for (int b = 0; b < n; ++b) f(a, b) = fisher(index[a], index[b]);
   }
-  // Systematic-error floor: no more than effective_pixels pixels' worth of information.
-  const double pixels = std::max(1, context.pixel_count);
-  f *= std::min(1.0, options.effective_pixels / pixels);
-  // Misfit inflation: reduced chi^2 of the fit.
-  const int dof = context.residual_count - n;
-  const double chi2 = dof > 0 ? 2.0 * context.cost / dof : 1.0;
-  const double inflation = std::max(1.0, chi2);
+  // Systematic-error floor (no more than effective_pixels pixels' worth of information) and misfit
+  // inflation (reduced chi^2 of the fit) in one factor.
+  f *= InformationScale(context, options, n);
 
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(f);
   if (eigen.info() != Eigen::Success) return out;
@@ -87,7 +96,7 @@ ParameterVector PosteriorStdDev(const Matrix7& fisher, const ParameterMask& free
         variance += w / lambda(j);
       }
     }
-    if (!unconstrained) out[index[a]] = std::sqrt(variance * inflation);
+    if (!unconstrained) out[index[a]] = std::sqrt(variance);
   }
   return out;
 }

@@ -13,7 +13,8 @@
 //
 // Rule: starting from all candidate parameters, the one with the largest std / max_std is left out
 // while that ratio exceeds 1, and the deviations are recomputed without it. Left-out parameters are
-// written as their U3M default with no texture and reported "not measured" with the reason.
+// written as their U3M default with no texture and reported "not measured" with the reason,
+// unless the data exclude the default (default_rejection_chi2 below).
 
 #include <Eigen/Core>
 #include <array>
@@ -33,6 +34,11 @@ struct ObservabilityOptions {
   // uniform_sigma_factor * its pooled uncertainty) is reported as a constant.
   double uniform_abs_tolerance = 0.01;
   double uniform_sigma_factor = 2.0;
+  // A parameter the rule would leave out is kept after all when setting it to its U3M default
+  // raises chi^2 (with the same effective-pixel scaling) by more than this: the data do not pin it
+  // down, but they exclude the default (e.g. roughness of a mirror-like sample whose highlights all
+  // fall between the lights or saturate).
+  double default_rejection_chi2 = 9.0;
 
   bool Check() const;
 };
@@ -64,6 +70,11 @@ ParameterVector PosteriorStdDev(const Eigen::Matrix<double, kFitParameterCount, 
 ObservabilityDecision DecideObservability(
     const Eigen::Matrix<double, kFitParameterCount, kFitParameterCount>& fisher, const ParameterMask& candidates,
     const ObservabilityContext& context, const ObservabilityOptions& options);
+
+// Chi^2 increase, in the corrected units above, of moving from a solution of cost `cost_at_fit`
+// to one of cost `cost_at_default` (both 0.5 * sum of squared weighted residuals).
+double EffectiveChi2Increase(double cost_at_fit, double cost_at_default, const ObservabilityContext& context,
+                             const ObservabilityOptions& options);
 
 // True when a measured map of standard deviation `map_std` over its pixels is uniform within its
 // pooled uncertainty (see ObservabilityOptions).

@@ -227,10 +227,9 @@ PixelCostSettings Settings(const FitOptions& options, const ParameterVector& par
 }
 
 double SamplesCost(const ClusterSamples& samples, std::size_t pixel_limit, const ParameterVector& params,
-                   const FitOptions& options, std::vector<double>& residuals) {
+                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& none = {}) {
   double cost = 0.0;
   const std::size_t pixels = std::min(pixel_limit, samples.pixels());
-  ParameterMask none{};
   for (std::size_t p = 0; p < pixels; ++p) {
     const auto obs = samples.pixel(p);
     residuals.resize(3 * obs.size());
@@ -376,7 +375,25 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   context.residual_count = residual_count;
   context.cost = cost;
   context.max_grazing_weight = max_grazing;
-  const ObservabilityDecision decision = DecideObservability(fisher, candidates, context, options.observability);
+  ObservabilityDecision decision = DecideObservability(fisher, candidates, context, options.observability);
+  // Keep a left-out parameter whose default the data exclude.
+  const double cost_at_fit = SamplesCost(samples, samples.pixels(), params, options, residuals, candidates);
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    if (!candidates[i] || decision.measured[i]) continue;
+    ParameterVector trial_default = params;
+    trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
+    const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, candidates);
+    const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
+    if (chi2 > options.observability.default_rejection_chi2) {
+      decision.measured[i] = true;
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
+                    "(chi^2 +%.3g): kept at the fitted value",
+                    decision.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
+      decision.reason[i] = buffer;
+    }
+  }
   *observability_s += Seconds(t_obs);
   const SolveOutcome first = outcome;
   if (decision.measured != candidates) {
@@ -408,7 +425,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     e.value = params[i];
     e.measured = decision.measured[i];
     e.std_dev = e.measured ? std_dev[i] : std::numeric_limits<double>::infinity();
-    e.reason = decision.reason[i];
+    e.reason = decision.reason[i];  // for a measured parameter only the "weakly constrained" note
   }
 
   // Mean base colour and relative RMS residual (unweighted) over the samples.

@@ -60,8 +60,8 @@ struct FitOptions {
   double function_tolerance = 1e-10;
   double parameter_tolerance = 1e-10;
   double gradient_tolerance = 1e-12;
-  // Fixed-point passes for the luminance of the base colour when a tint is in play.
-  int luminance_passes = 3;
+  // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
+  int luminance_passes = 4;
   // Per-pixel refinement of roughness and specular.
   bool refine_per_pixel = true;
   double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
@@ -78,7 +78,7 @@ struct ParameterEstimate {
   double value = 0.0;
   double std_dev = 0.0;  // posterior standard deviation; inf when not measured
   bool measured = false;
-  std::string reason;    // why it was left out ("" when measured)
+  std::string reason;    // why it was left out; for a measured one only a "weakly constrained" note
 };
 
 struct ClusterFit {
