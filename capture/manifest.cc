@@ -534,8 +534,8 @@ Manifest ParseManifest(const std::string& json_text, const std::string& source_n
   json doc;
   try {
     doc = json::parse(json_text);
-  } catch (const json::parse_error& e) {
-    throw InputError(source_name, "", std::string("valid JSON: ") + e.what());
+  } catch (const json::exception& e) {  // syntax errors, and numbers beyond double (1e999)
+    throw InputError(source_name, "", std::string("valid JSON with finite numbers: ") + e.what());
   }
   const Node root(doc, source_name, "");
   root.ExpectObject("a capture manifest");

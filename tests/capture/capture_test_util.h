@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <unistd.h>
 
 #include "capture/manifest.h"
 #include "core/image.h"
@@ -18,10 +19,11 @@ namespace u3mscan::testing {
 class TempDir {
  public:
   TempDir() {
+    static int counter = 0;  // several TempDirs in one test get different folders
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
     path_ = std::filesystem::temp_directory_path() /
             ("u3mscan_capture_" + std::string(info->test_suite_name()) + "_" + info->name() + "_" +
-             std::to_string(::getpid()));
+             std::to_string(::getpid()) + "_" + std::to_string(counter++));
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
   }
