@@ -456,7 +456,7 @@ Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light
                                  ? DegToRad(light.emitter_radius)
                                  : light.emitter_radius / (light.position_mm - point).norm();
   const double mm_per_px = (cam.position_mm - point).norm() / cam.fx;
-  constexpr double kMinSpotSigmaPx = 0.8;  // a sharp lens's blur
+  constexpr double kMinSpotSigmaPx = 1.0;  // a sharp lens's blur
   const double sigma = std::max(kMinSpotSigmaPx, 0.5 * radius_mm * 0.5 * emitter_rad / mm_per_px);
   const int reach = static_cast<int>(std::ceil(4 * sigma));
   const int c0 = std::max(0, static_cast<int>(spot.x()) - reach), c1 = std::min(cam.width - 1, static_cast<int>(spot.x()) + reach + 1);

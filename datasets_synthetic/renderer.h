@@ -87,7 +87,7 @@ Image RenderPlaneTarget(const Rig& rig, int camera_index, const PlaneTarget& tar
 // by the light and shadowed by the sphere. The mirrored emitter is a Gaussian spot of peak
 // `highlight_level` centred exactly on the image of the reflection point (where the sphere normal
 // bisects the directions to light and camera), sigma from the emitter's angular size, at least
-// 0.8 px: a highlight much smaller than a pixel, as a lens would blur it, with an unbiased centroid.
+// 1 px: a highlight much smaller than a pixel, as a lens would blur it, with an unbiased centroid.
 // Supersampled like RenderPlaneTarget.
 Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light, const Eigen::Vector3d& center_mm,
                          double radius_mm, double highlight_level, int samples_per_axis,
