@@ -202,6 +202,7 @@ Eigen::Vector3d SceneRenderer::Trace(const Eigen::Vector3d& o, const Eigen::Vect
 void SceneRenderer::SetCamera(int camera_index) {
   CheckCamera(rig_, camera_index);
   camera_index_ = camera_index;
+  ambient_ = Image();
   const RigCamera& cam = rig_.cameras[camera_index];
   hits_.assign(static_cast<std::size_t>(cam.width) * cam.height * 4, 0.0f);
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
@@ -321,6 +322,11 @@ Image SceneRenderer::RenderAmbient() const {
     }
   });
   return out;
+}
+
+const Image& SceneRenderer::AmbientImage() {
+  if (ambient_.empty()) ambient_ = RenderAmbient();
+  return ambient_;
 }
 
 Image SceneRenderer::RenderBacklight(double level) const {

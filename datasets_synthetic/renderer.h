@@ -45,6 +45,9 @@ class SceneRenderer {
   Image RenderLight(int light_index) const;
   // 3 channels: the room light alone, a uniform sky of Rig::ambient_irradiance (no occlusion).
   Image RenderAmbient() const;
+  // RenderAmbient of the current camera, computed once and kept until the next SetCamera (every
+  // sample frame carries the room light).
+  const Image& AmbientImage();
   // 1 channel: a light table of apparent value `level` behind the sample, front lights off. Where
   // the camera sees the sample, (1 - alpha) of it comes through; around the sample, all of it.
   Image RenderBacklight(double level) const;
@@ -65,7 +68,8 @@ class SceneRenderer {
   int camera_index_ = -1;
   double half_width_mm_ = 0, half_height_mm_ = 0;
   double min_height_mm_ = 0, max_height_mm_ = 0;
-  std::vector<float> hits_;  // x, y, z per camera pixel
+  std::vector<float> hits_;  // x, y, z, vignetting per camera pixel
+  Image ambient_;            // AmbientImage() cache, empty until asked
 };
 
 // A flat Lambertian target lying in z = 0 (white target, ChArUco board, colour chart): `albedo` is a
