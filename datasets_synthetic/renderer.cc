@@ -74,8 +74,19 @@ class SceneGrid {
   double pitch_;
 };
 
+// The scene's fibre-direction map, when its SceneTruth has one (a `tangent` member, 3 channels).
+template <typename Scene>
+const Image* TangentMap(const Scene& scene) {
+  if constexpr (requires { scene.tangent; }) {
+    return scene.tangent.empty() ? nullptr : &scene.tangent;
+  } else {
+    return nullptr;
+  }
+}
+
 struct SurfacePoint {
   Vec3<float> normal;
+  Vec3<float> tangent = Vec3<float>::Zero();  // zero: none given
   PrincipledParams<float> params;
   float alpha = 1.0f;
 };
@@ -86,6 +97,9 @@ SurfacePoint SampleSurface(const SceneTruth& s, const Footprint& f) {
                           SceneGrid::Sample(s.normal, 2, f, 1.0f));
   const float len = sp.normal.norm();
   sp.normal = len > 1e-6f ? Vec3<float>(sp.normal / len) : Vec3<float>(0, 0, 1);
+  if (const Image* t = TangentMap(s)) {
+    sp.tangent = Vec3<float>(SceneGrid::Sample(*t, 0, f, 0.0f), SceneGrid::Sample(*t, 1, f, 0.0f), SceneGrid::Sample(*t, 2, f, 0.0f));
+  }
   auto& p = sp.params;
   p.base_color = Vec3<float>(SceneGrid::Sample(s.base_color, 0, f, 0.8f), SceneGrid::Sample(s.base_color, 1, f, 0.8f),
                              SceneGrid::Sample(s.base_color, 2, f, 0.8f));
@@ -100,10 +114,12 @@ SurfacePoint SampleSurface(const SceneTruth& s, const Footprint& f) {
   return sp;
 }
 
-// Local shading frame: z = normal, x = world +x projected onto the tangent plane (the direction of
-// anisotropy and, for woven scenes, of the warp), y = z x x.
-void LocalFrame(const Vec3<float>& n, Vec3<float>* t, Vec3<float>* b) {
-  Vec3<float> x = Vec3<float>(1, 0, 0) - n * n.x();
+// Local shading frame: z = normal, x = the scene's fibre direction (the axis of anisotropy) made
+// orthogonal to the normal, or world +x projected onto the tangent plane where the scene gives
+// none (or it is degenerate after interpolation), y = z x x.
+void LocalFrame(const Vec3<float>& n, const Vec3<float>& fibre, Vec3<float>* t, Vec3<float>* b) {
+  Vec3<float> x = fibre - n * n.dot(fibre);
+  if (x.squaredNorm() < 1e-6f) x = Vec3<float>(1, 0, 0) - n * n.x();
   if (x.squaredNorm() < 1e-8f) x = Vec3<float>(0, 1, 0) - n * n.y();
   *t = x.normalized();
   *b = n.cross(*t);
@@ -283,7 +299,7 @@ Image SceneRenderer::RenderLight(int light_index) const {
           alpha = sp.alpha;
           if (alpha > 0) {
             Vec3<float> t, b;
-            LocalFrame(sp.normal, &t, &b);
+            LocalFrame(sp.normal, sp.tangent, &t, &b);
             const Vec3<float> l_local(l.dot(t), l.dot(b), l.dot(sp.normal));
             const Vec3<float> v_local(v.dot(t), v.dot(b), v.dot(sp.normal));
             rgb = alpha * std::max(0.0f, l_local.z()) * EvaluateModel(scene_.model, sp.params, l_local, v_local);

@@ -8,8 +8,9 @@
 // at x = (col + 0.5 - W/2) pitch, y = (H/2 - row - 0.5) pitch, z = height_mm. Outside it, a
 // Lambertian table of Rig::table_reflectance at z = 0. Every camera pixel casts one ray through its
 // centre (undistorted), marches the height field and refines the hit by bisection, and shades it with
-// the Principled BRDF of core/principled_brdf.h in the surface's local frame (z = normal, x = +x
-// projected onto the tangent plane, the direction of anisotropy). Cast shadows: a march from the
+// the Principled BRDF of core/principled_brdf.h in the surface's local frame (z = normal, x = the
+// scene's tangent map, the fibre direction and axis of anisotropy, or +x projected onto the
+// tangent plane when the scene has none). Cast shadows: a march from the
 // hit toward the light. Holes (alpha < 1) blend the fabric with the table below.
 
 #include <Eigen/Core>
