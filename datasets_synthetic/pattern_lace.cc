@@ -17,6 +17,7 @@ constexpr double kPetals = 6.0;
 constexpr double kPetalDepth = 0.12;      // relative radius modulation of the flower outline
 constexpr double kEyeletRadiusMm = 0.55;  // hole in the motif centre
 constexpr double kEyeletRingMm = 0.8;     // centre line of the gimp ring around it
+constexpr double kNetSlub = 0.1;          // relative thickness variation between net threads
 
 class LaceModel final : public SurfaceModel {
  public:
@@ -67,8 +68,12 @@ class LaceModel final : public SurfaceModel {
     const auto thread = static_cast<std::int64_t>(std::round(cu >= cv ? u / n : v / n));
     ApplyYarn(spec_.net, HashUnit(seed_, kLaceColor, thread, cu >= cv ? 0 : 1),
               HashUnit(seed_, kLaceColor2, thread, cu >= cv ? 0 : 1), fibre, &p);
-    // Where two threads cross their crowns add up: the twisted knot of a bobbin net.
-    p.height_mm = static_cast<float>(spec_.net_thickness_mm * (cu + cv));
+    // Thread-to-thread thickness (+-kNetSlub). Where two threads cross their crowns add up: the
+    // twisted knot of a bobbin net.
+    const auto iu = static_cast<std::int64_t>(std::round(u / n)), iv = static_cast<std::int64_t>(std::round(v / n));
+    const double su = 1.0 + kNetSlub * (2.0 * HashUnit(seed_, kLaceSlub, iu, 0) - 1.0);
+    const double sv = 1.0 + kNetSlub * (2.0 * HashUnit(seed_, kLaceSlub, iv, 1) - 1.0);
+    p.height_mm = static_cast<float>(spec_.net_thickness_mm * (su * cu + sv * cv));
     const double inv = 1.0 / std::numbers::sqrt2;
     p.tangent_x = static_cast<float>(inv);
     p.tangent_y = static_cast<float>(cu >= cv ? -inv : inv);
@@ -76,7 +81,7 @@ class LaceModel final : public SurfaceModel {
   }
 
   double MaxHeightMm() const {
-    return std::max({spec_.net_thickness_mm + spec_.gimp_thickness_mm, 2.0 * spec_.net_thickness_mm,
+    return std::max({spec_.net_thickness_mm + spec_.gimp_thickness_mm, 2.0 * (1.0 + kNetSlub) * spec_.net_thickness_mm,
                      1.5 * spec_.net_thickness_mm});
   }
 

@@ -31,6 +31,7 @@ inline float HashUnit(std::uint64_t seed, std::uint64_t stream, std::int64_t a, 
 enum Stream : std::uint64_t {
   kWarpColor = 1, kWarpColor2, kWeftColor, kWeftColor2, kWarpSlub, kWeftSlub, kFibre, kPlyPhase,
   kPileTips, kPileCrush, kPileLean, kKnitColor, kKnitColor2, kKnitSlub, kLaceColor, kLaceColor2,
+  kLaceSlub,
 };
 
 // Quintic fade (Perlin 2002): C2 continuous, so noise heights have continuous normals.

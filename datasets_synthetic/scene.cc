@@ -291,8 +291,9 @@ SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
   truth.pitch_mm = pitch;
   truth.seed = options.seed;
   truth.model = spec.reflectance;
-  truth.height_min_mm = spec.height_min_mm;
-  truth.height_max_mm = spec.height_max_mm;
+  // The maps hold float heights: round the declared bounds outward to float so they hold exactly.
+  truth.height_min_mm = std::nextafter(static_cast<float>(spec.height_min_mm), -HUGE_VALF);
+  truth.height_max_mm = std::nextafter(static_cast<float>(spec.height_max_mm), HUGE_VALF);
   truth.repeat_x_mm = spec.repeat_x_mm;
   truth.repeat_y_mm = spec.repeat_y_mm;
   truth.description = it->second.description;
