@@ -178,7 +178,7 @@ CompactFrame DecodeRaw(const fs::path& path, const FrameDecodeOptions& options) 
   LibRaw& raw = *s.raw;
   s.stream->Watch();
   int rc = raw.unpack();
-  if (rc != LIBRAW_SUCCESS) RawFail(path, "complete RAW image data", rc);
+  if (rc != LIBRAW_SUCCESS) RawFail(path, "complete RAW image data (truncated or corrupt?)", rc);
   if (s.stream->missing_bytes() > kTruncationSlackBytes) {
     throw InputError(path.string(), "",
                      "complete RAW image data; the file ends " + std::to_string(s.stream->missing_bytes()) +
@@ -351,7 +351,10 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
     } else {
       ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     }
-    if (!ok) throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
+    // OIIO's TIFF reader reports a short strip as an error message but still returns true.
+    if (!ok || in->has_error()) {
+      throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
+    }
     const int row_begin = std::max(band, y), row_end = std::min(band_end, y + h);
     ParallelFor(static_cast<std::size_t>(std::max(0, row_end - row_begin)), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
