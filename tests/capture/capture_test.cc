@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <thread>
 
 #include "capture/capture.h"
 #include "capture/dng_writer.h"
@@ -194,6 +195,36 @@ TEST_F(CaptureFolder, SaturationSurvivesNormalisation) {
   const DecodedFrame f = capture.LoadFrame(1, norm);
   EXPECT_TRUE(f.IsSaturated(10, 11));
   EXPECT_FALSE(f.IsSaturated(30, 30));
+}
+
+TEST_F(CaptureFolder, DecodeOptionsComeFromTheFramesCamera) {
+  const Capture capture = Capture::Open(dir_.path());
+  const FrameDecodeOptions opt = capture.DecodeOptions(1);
+  ASSERT_TRUE(opt.response.has_value());
+  EXPECT_EQ(opt.response->white_level, kWhite);
+  EXPECT_FALSE(opt.white_balance.has_value());
+}
+
+TEST_F(CaptureFolder, ConcurrentRegionReadsAgree) {
+  // Two threads sweep row bands of both RAW frames through one shared cache.
+  const Capture capture = Capture::Open(dir_.path());
+  const DecodedFrame full0 = capture.LoadFrame(0), full1 = capture.LoadFrame(1);
+  std::vector<int> mismatches(2, 0);
+  std::vector<std::thread> workers;
+  for (int t = 0; t < 2; ++t) {
+    workers.emplace_back([&, t] {
+      for (int band = 0; band < kSize; band += 16) {
+        for (std::size_t index : {std::size_t{0}, std::size_t{1}}) {
+          const DecodedFrame part = capture.LoadFrameRows(index, band, 16);
+          const DecodedFrame& full = index == 0 ? full0 : full1;
+          for (int r = 0; r < 16; ++r) mismatches[t] += part.rgb.at(2, r, 40) != full.rgb.at(2, band + r, 40);
+        }
+      }
+    });
+  }
+  for (auto& w : workers) w.join();
+  EXPECT_EQ(mismatches[0] + mismatches[1], 0);
+  EXPECT_EQ(capture.cached_bytes(), 2u * kSize * kSize * 7);
 }
 
 }  // namespace
