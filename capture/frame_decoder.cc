@@ -236,6 +236,14 @@ CompactFrame DecodeRaw(const fs::path& path, const FrameDecodeOptions& options) 
   }
   out.rgb16.resize(static_cast<std::size_t>(width) * height * 3);
   std::copy_n(reinterpret_cast<const std::uint16_t*>(img->data), out.rgb16.size(), out.rgb16.data());
+  // libraw clips its output at 65535; a colour matrix with gains above 1 can get there from
+  // unsaturated photosites near the white level. A clipped value is not data either.
+  ParallelFor(static_cast<std::size_t>(height), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b * width; i < e * width; ++i) {
+      const std::uint16_t* px = out.rgb16.data() + i * 3;
+      if (px[0] == 65535 || px[1] == 65535 || px[2] == 65535) out.saturated[i] = 1;
+    }
+  });
 
   // libraw scaled by pre_mul / max(pre_mul) so that no channel clips (highlight = 1); undo the
   // division by the largest so the reference channel (smallest multiplier) has 1.0 = white level.
