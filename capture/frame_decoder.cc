@@ -123,9 +123,10 @@ class CountingRawStream : public LibRaw_file_datastream {
   long missing_bytes_ = 0;
 };
 
+// Members in this order so the stream outlives the LibRaw object that reads from it.
 struct RawSession {
-  std::unique_ptr<LibRaw> raw = std::make_unique<LibRaw>(0);
   std::unique_ptr<CountingRawStream> stream;
+  std::unique_ptr<LibRaw> raw = std::make_unique<LibRaw>(0);
 };
 
 [[noreturn]] void RawFail(const fs::path& path, const std::string& what, int code) {
@@ -144,7 +145,7 @@ void OpenRaw(const fs::path& path, const FrameDecodeOptions& options, RawSession
   p.gamm[1] = 1.0;
   p.no_auto_bright = 1;
   p.user_qual = 3;             // AHD demosaic
-  p.highlight = 1;             // unclipped: white balance must not clip channels, see DecodeRawFrame
+  p.highlight = 1;             // unclipped: white balance must not clip channels, see DecodeRaw
   p.adjust_maximum_thr = 0.0f; // keep the file's white level, never the data maximum
   p.user_flip = 0;             // sensor orientation: pixels must match the camera intrinsics
   p.use_fuji_rotate = 0;       // no 45-degree Fuji rotation, no pixel-aspect stretch
@@ -162,7 +163,9 @@ void OpenRaw(const fs::path& path, const FrameDecodeOptions& options, RawSession
   if (options.response) {
     // libraw 0.20 takes user_sat as the white level above the (subtracted) black level: with
     // user_sat set it scales by 65535 / user_sat, not 65535 / (user_sat - black).
+    // The manifest's black level replaces the file's, per-channel offsets included.
     p.user_black = static_cast<int>(std::lround(options.response->black_level));
+    for (int c = 0; c < 4; ++c) p.user_cblack[c] = 0;
     p.user_sat = static_cast<int>(std::lround(options.response->white_level - options.response->black_level));
   }
   const int rc = s->raw->open_datastream(s->stream.get());
