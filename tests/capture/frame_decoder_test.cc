@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <random>
+#include <sstream>
 
 #include "capture/dng_writer.h"
 #include "capture/frame_decoder.h"
@@ -356,6 +358,43 @@ TEST_F(FrameDecoder, HugeDimensionHeaders) {
     TIFFClose(t);
   }
   EXPECT_NE(ExpectInputError(dng).find("60000x60000"), std::string::npos);
+}
+
+TEST_F(FrameDecoder, CorruptedBytesGiveDataOrInputErrorNeverACrash) {
+  // Random bytes overwritten near the header and near the end (where libtiff puts the IFD), with
+  // a fixed seed: each case must decode or throw InputError, nothing else.
+  constexpr int kCasesPerFile = 40;
+  constexpr std::size_t kRegionBytes = 400;
+  const fs::path dng = dir_.path() / "c.dng", tif = dir_.path() / "c.tif", png = dir_.path() / "c.png";
+  WriteDng(dng, MosaicFromLinearRgb(truth_, CfaPattern::kRggb, 0, 65535), kSize, kSize);
+  WriteImageFile(truth_, tif, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  WriteImageFile(truth_, png, {SampleFormat::kUInt8, PixelEncoding::kSrgb});
+  std::mt19937 rng(20261122);
+  int refused = 0;
+  for (const fs::path& original : {dng, tif, png}) {
+    std::stringstream bytes;
+    bytes << std::ifstream(original, std::ios::binary).rdbuf();
+    const std::string clean = bytes.str();
+    ASSERT_GT(clean.size(), 2 * kRegionBytes);
+    for (int i = 0; i < kCasesPerFile; ++i) {
+      std::string data = clean;
+      const int flips = 1 + static_cast<int>(rng() % 8);
+      for (int j = 0; j < flips; ++j) {
+        const std::size_t offset = rng() % kRegionBytes;
+        data[(rng() % 2) ? offset : data.size() - 1 - offset] = static_cast<char>(rng());
+      }
+      const fs::path path = dir_.path() / ("case" + original.extension().string());
+      std::ofstream(path, std::ios::binary) << data;
+      try {
+        const DecodedFrame f = DecodeFrame(path);
+        EXPECT_EQ(f.rgb.channels(), 3);
+      } catch (const InputError& e) {
+        EXPECT_EQ(e.file(), path.string());
+        ++refused;
+      }
+    }
+  }
+  EXPECT_GT(refused, 0);  // the corruption did reach the parsers
 }
 
 }  // namespace
