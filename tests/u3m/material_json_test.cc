@@ -108,7 +108,8 @@ TEST(MaterialJson, NullParameterBecomesDefaultIn11WithANote) {
   options.version = SchemaVersion::k1_1;
   const MaterialWriteResult w = WriteMaterialJson(m, options, "out.u3m");
   EXPECT_TRUE(HasIssue(w.notes, "/material/front/transmission", IssueSeverity::kWarning));
-  const JsonValue& t = *ParseJson(w.text, "x").Find("material")->Find("front")->Find("transmission");
+  const JsonValue written = ParseJson(w.text, "x");
+  const JsonValue& t = *written.Find("material")->Find("front")->Find("transmission");
   ASSERT_TRUE(t.is_object());
   EXPECT_EQ(t.Find("constant")->number(), 0.0);
   EXPECT_TRUE(t.Find("texture")->is_null());
@@ -249,8 +250,15 @@ TEST(MaterialJson, ToleratedDeviationsAreReportedWithPointers) {
   text = Replace(text, "\"back\": null", "\"back\": null, \"vendor_key\": 1");
   text = Replace(text, "\"metalness\": {\"constant\": 0.0, \"texture\": null}", "\"metalness\": null");
   text = Replace(text, "\"dpi\": {\"x\": 72, \"y\": 72}", "\"dpi\": 72");
+  text = Replace(text, "\"type\": \"Cotton\"", "\"type\": \"Bamboo\"");
+  text = Replace(text, "\"r\": 0.25, \"g\": 0.5", "\"r\": 1.25, \"g\": 0.5");
   const MaterialReadResult r = ReadMaterialJson(text, "dev.u3m");
   EXPECT_TRUE(HasIssue(r.issues, "/material/front/ior/constant", IssueSeverity::kWarning));
+  EXPECT_TRUE(HasIssue(r.issues, "/material/physics/composition/parts/0/type", IssueSeverity::kError));
+  EXPECT_EQ((*r.material.physics->composition)[0].type, "other");
+  EXPECT_EQ((*r.material.physics->composition)[0].name, "Bamboo");
+  EXPECT_TRUE(HasIssue(r.issues, "/material/front/basecolor/constant/r", IssueSeverity::kError));
+  EXPECT_EQ(r.material.front->basecolor.constant.r, 1.0);
   EXPECT_TRUE(HasIssue(r.issues, "/material/front/displacement/texture/image/path", IssueSeverity::kError));
   EXPECT_EQ(r.material.front->displacement.texture->image.path, "textures/disp.png");
   EXPECT_TRUE(HasIssue(r.issues, "/material/vendor_key", IssueSeverity::kError));
