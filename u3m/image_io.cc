@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <random>
 #include <system_error>
@@ -102,6 +103,17 @@ ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path) {
   return info;
 }
 
+// TIFF's "YYYY:MM:DD HH:MM:SS" in UTC. OIIO would otherwise stamp the local time of writing,
+// which makes two writes of the same map differ.
+std::string TiffDateTime(std::time_t utc) {
+  if (utc == 0) utc = std::time(nullptr);
+  std::tm t{};
+  gmtime_r(&utc, &t);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y:%m:%d %H:%M:%S", &t);
+  return text;
+}
+
 std::string RandomSuffix() {
   static thread_local std::mt19937_64 rng{std::random_device{}()};
   return std::to_string(rng() % 1000000000ull);
@@ -166,6 +178,7 @@ void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOp
     spec.attribute("ResolutionUnit", "in");
   }
   if (ext == ".exr" || ext == ".tif" || ext == ".tiff") spec.attribute("compression", "zip");
+  if (ext == ".tif" || ext == ".tiff") spec.attribute("DateTime", TiffDateTime(options.modified_utc));
   // Maps hold straight (unassociated) alpha, as PNG and U3M expect; without this OIIO would divide
   // the colour by alpha on the way out.
   spec.attribute("oiio:UnassociatedAlpha", 1);

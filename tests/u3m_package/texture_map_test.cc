@@ -118,7 +118,9 @@ TEST(TextureMap, ColourMapsAreSrgbEncodedAndTagged) {
     TextureFileInfo info;
     const Image back = ReadTextureMap(path, MapKind::kColour, &info);
     EXPECT_TRUE(info.file.srgb_tagged);
-    if (std::string(fc.extension) == ".png") EXPECT_EQ(PngChunks(path).count("sRGB"), 1u);
+    if (std::string(fc.extension) == ".png") {
+      EXPECT_EQ(PngChunks(path).count("sRGB"), 1u);
+    }
     // The file holds encoded values: read raw, they follow the sRGB curve.
     const Image raw = ReadImageFile(path, PixelEncoding::kLinear);
     const double max_code = fc.format == SampleFormat::kUInt8 ? 255.0 : 65535.0;
@@ -265,12 +267,17 @@ TEST(TextureMap, QuantisedMeanDiffersFromThePlainMeanWhereItMatters) {
 TEST(TextureMap, WritesAreReproducible) {
   TempDir dir;
   const Image map = RandomMap(3, 0.0f, 1.0f, 7);
-  for (const char* ext : {".png", ".tif"}) {
-    WriteTextureMap(map, MapKind::kColour, dir.path() / (std::string("a") + ext), SampleFormat::kUInt8);
-    WriteTextureMap(map, MapKind::kColour, dir.path() / (std::string("b") + ext), SampleFormat::kUInt8);
-    EXPECT_EQ(FileBytes(dir.path() / (std::string("a") + ext)), FileBytes(dir.path() / (std::string("b") + ext)))
-        << ext << ": same map, same bytes (so .u3ma archives are reproducible)";
+  constexpr std::time_t kFixedTimeUtc = 1709646330;  // 2024-03-05 13:45:30 UTC
+  for (const char* ext : {".png", ".tif", ".exr"}) {
+    const SampleFormat format = std::string(ext) == ".exr" ? SampleFormat::kFloat32 : SampleFormat::kUInt8;
+    const fs::path a = dir.path() / (std::string("a") + ext), b = dir.path() / (std::string("b") + ext);
+    WriteTextureMap(map, MapKind::kColour, a, format, kFixedTimeUtc);
+    WriteTextureMap(map, MapKind::kColour, b, format, kFixedTimeUtc + 0);
+    EXPECT_EQ(FileBytes(a), FileBytes(b)) << ext << ": same map and time, same bytes (reproducible .u3ma)";
   }
+  auto in = OIIO::ImageInput::open((dir.path() / "a.tif").string());
+  ASSERT_TRUE(in);
+  EXPECT_EQ(in->spec().get_string_attribute("DateTime"), "2024:03:05 13:45:30") << "TIFF time in UTC";
 }
 
 TEST(TextureMap, BadRequestsAndBadFilesAreInputErrorsThatWriteNothing) {
