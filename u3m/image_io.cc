@@ -8,6 +8,7 @@
 #include <ctime>
 #include <fstream>
 #include <random>
+#include <stdexcept>
 #include <system_error>
 #include <vector>
 
@@ -119,6 +120,57 @@ std::string RandomSuffix() {
   return std::to_string(rng() % 1000000000ull);
 }
 
+// sRGB-decoded value of every 8- and 16-bit code, built once. The reader and the writer's means
+// both go through DecodeSample, so one table keeps them identical and saves a pow per sample.
+struct SrgbTables {
+  std::vector<float> eight, sixteen;
+  SrgbTables() : eight(256), sixteen(65536) {
+    for (std::size_t c = 0; c < eight.size(); ++c) eight[c] = static_cast<float>(SrgbToLinear(c / 255.0));
+    for (std::size_t c = 0; c < sixteen.size(); ++c) sixteen[c] = static_cast<float>(SrgbToLinear(c / 65535.0));
+  }
+};
+const SrgbTables& SrgbDecodeTables() {
+  static const SrgbTables tables;
+  return tables;
+}
+
+// 8-bit sRGB encoding without a pow per sample. Code k + 1 begins at the linear value whose
+// encoding is (k + 0.5) / 255 (round to nearest in encoded space). [0, 1] is cut into kBuckets equal
+// parts, each holding at most one code boundary (the narrowest gap between boundaries, at the
+// bottom of the curve, is 1 / (255 * 12.92) = 3.0e-4 > 1 / 4096), so the code is the bucket's first
+// code plus one comparison.
+class Srgb8Encoder {
+ public:
+  Srgb8Encoder() : bounds_(255), first_code_(kBuckets + 1) {
+    for (std::size_t k = 0; k < bounds_.size(); ++k) bounds_[k] = SrgbToLinear((k + 0.5) / 255.0);
+    for (std::size_t b = 0; b <= kBuckets; ++b) {
+      const double start = static_cast<double>(b) / kBuckets;
+      first_code_[b] = static_cast<std::uint8_t>(std::upper_bound(bounds_.begin(), bounds_.end(), start) - bounds_.begin());
+    }
+    for (std::size_t b = 0; b < kBuckets; ++b) {
+      if (first_code_[b + 1] - first_code_[b] > 1) throw std::logic_error("Srgb8Encoder: bucket holds two code boundaries");
+    }
+  }
+  // v in [0, 1].
+  std::uint32_t Encode(float v) const {
+    const double x = v;
+    const std::size_t bucket = std::min(static_cast<std::size_t>(x * kBuckets), kBuckets);
+    std::uint32_t code = first_code_[bucket];
+    if (code < 255 && x >= bounds_[code]) ++code;
+    return code;
+  }
+
+ private:
+  static constexpr std::size_t kBuckets = 4096;
+  std::vector<double> bounds_;
+  std::vector<std::uint8_t> first_code_;
+};
+
+const Srgb8Encoder& Srgb8() {
+  static const Srgb8Encoder encoder;
+  return encoder;
+}
+
 // Interleaved samples of `image` in the file's sample type, encoded and quantised (integer formats).
 template <typename T>
 std::vector<T> Interleave(const Image& image, const ImageWriteOptions& options) {
@@ -146,15 +198,22 @@ std::vector<T> Interleave(const Image& image, const ImageWriteOptions& options) 
 }  // namespace
 
 std::uint32_t EncodeSample(float linear, PixelEncoding encoding, SampleFormat format) {
-  float v = std::isnan(linear) ? 0.0f : std::clamp(linear, 0.0f, 1.0f);
-  if (encoding == PixelEncoding::kSrgb) v = LinearToSrgb(v);
+  const float v = std::isnan(linear) ? 0.0f : std::clamp(linear, 0.0f, 1.0f);
   const std::uint32_t max_code = MaxCode(format);
-  return static_cast<std::uint32_t>(std::lround(static_cast<double>(v) * max_code));
+  if (encoding == PixelEncoding::kLinear) {
+    return static_cast<std::uint32_t>(std::lround(static_cast<double>(v) * max_code));
+  }
+  if (format == SampleFormat::kUInt8) return Srgb8().Encode(v);
+  return static_cast<std::uint32_t>(std::lround(LinearToSrgb(static_cast<double>(v)) * max_code));
 }
 
 float DecodeSample(std::uint32_t code, PixelEncoding encoding, SampleFormat format) {
-  const float v = static_cast<float>(static_cast<double>(code) / MaxCode(format));
-  return encoding == PixelEncoding::kSrgb ? SrgbToLinear(v) : v;
+  const std::uint32_t max_code = MaxCode(format);
+  code = std::min(code, max_code);
+  if (encoding == PixelEncoding::kSrgb) {
+    return format == SampleFormat::kUInt8 ? SrgbDecodeTables().eight[code] : SrgbDecodeTables().sixteen[code];
+  }
+  return static_cast<float>(static_cast<double>(code) / max_code);
 }
 
 void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOptions& options) {

@@ -264,6 +264,31 @@ TEST(TextureMap, QuantisedMeanDiffersFromThePlainMeanWhereItMatters) {
   EXPECT_NEAR(colour[1], 0.25, kFloatTolerance);
 }
 
+// The 8-bit sRGB encoder uses a bucket table instead of a pow; it must still round to the nearest
+// code in encoded space, and DecodeSample must invert it.
+TEST(TextureMap, EncodeSampleRoundsToTheNearestEncodedCode) {
+  constexpr int kSteps = 1 << 20;
+  constexpr double kTieWidth = 1e-6;  // in codes: float input cannot resolve ties closer than this
+  int mismatches = 0;
+  for (int i = 0; i <= kSteps; ++i) {
+    const float v = static_cast<float>(i) / kSteps;
+    for (SampleFormat format : {SampleFormat::kUInt8, SampleFormat::kUInt16}) {
+      const double max_code = format == SampleFormat::kUInt8 ? 255.0 : 65535.0;
+      const double exact = LinearToSrgb(static_cast<double>(v)) * max_code;
+      const auto code = EncodeSample(v, PixelEncoding::kSrgb, format);
+      if (code != std::lround(exact) && std::abs(exact - std::floor(exact) - 0.5) > kTieWidth) ++mismatches;
+      EXPECT_EQ(EncodeSample(v, PixelEncoding::kLinear, format), std::lround(v * max_code));
+      if (i % 4096 == 0) {
+        EXPECT_NEAR(DecodeSample(code, PixelEncoding::kSrgb, format), SrgbToLinear(code / max_code), kFloatTolerance);
+      }
+    }
+  }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_EQ(EncodeSample(-1.0f, PixelEncoding::kSrgb, SampleFormat::kUInt8), 0u);
+  EXPECT_EQ(EncodeSample(2.0f, PixelEncoding::kSrgb, SampleFormat::kUInt8), 255u);
+  EXPECT_EQ(EncodeSample(std::nanf(""), PixelEncoding::kSrgb, SampleFormat::kUInt16), 0u);
+}
+
 TEST(TextureMap, WritesAreReproducible) {
   TempDir dir;
   const Image map = RandomMap(3, 0.0f, 1.0f, 7);
