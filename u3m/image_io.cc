@@ -44,8 +44,6 @@ std::string Lower(std::string s) {
   return s;
 }
 
-bool IsPng(const fs::path& path) { return Lower(path.extension().string()) == ".png"; }
-
 // OIIO reports every untagged PNG as "sRGB" (the PNG default), so the tag is read from the chunks
 // themselves: an sRGB chunk, or an embedded ICC profile named like sRGB (iCCP), before the image data.
 bool PngHasSrgbTag(const fs::path& path) {
@@ -79,13 +77,13 @@ double DpiFrom(float resolution, const std::string& unit) {
   return 0.0;
 }
 
-ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path) {
+ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path, bool png) {
   ImageReadInfo info;
   info.width = spec.width;
   info.height = spec.height;
   info.channels = spec.nchannels;
   info.format = FromTypeDesc(spec.format);
-  if (IsPng(path)) {
+  if (png) {
     info.srgb_tagged = PngHasSrgbTag(path);
   } else {
     // TIFF and JPEG: the EXIF colour space tag, or an ICC profile that names sRGB.
@@ -289,14 +287,14 @@ std::unique_ptr<oiio::ImageInput> OpenInput(const fs::path& path) {
 ImageReadInfo ReadImageInfo(const fs::path& path) {
   auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
-  return InfoFromSpec(in->spec(), path);
+  return InfoFromSpec(in->spec(), path, std::string(in->format_name()) == "png");
 }
 
 Image ReadImageFile(const fs::path& path, PixelEncoding encoding, ImageReadInfo* info_out) {
   auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
   const oiio::ImageSpec& spec = in->spec();
-  const ImageReadInfo info = InfoFromSpec(spec, path);
+  const ImageReadInfo info = InfoFromSpec(spec, path, std::string(in->format_name()) == "png");
   if (info_out) *info_out = info;
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
     throw InputError(path.string(), "", "an image with a positive size");
