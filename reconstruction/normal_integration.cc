@@ -1,0 +1,432 @@
+#include "reconstruction/normal_integration.h"
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <numbers>
+#include <stdexcept>
+#include <unsupported/Eigen/FFT>
+#include <vector>
+
+#include "core/parallel.h"
+
+namespace u3mscan::reconstruction {
+
+std::string IntegratorName(Integrator integrator) { return integrator == Integrator::kDct ? "dct" : "robust"; }
+
+Integrator ParseIntegrator(const std::string& name) {
+  if (name == "dct") return Integrator::kDct;
+  if (name == "robust") return Integrator::kRobust;
+  throw std::invalid_argument("integrator must be dct or robust, got '" + name + "'");
+}
+
+bool IntegrationOptions::Check() const {
+  return pitch_mm >= 0.0 && std::isfinite(pitch_mm) && min_normal_z > 0.0 && min_normal_z < 1.0 &&
+         std::isfinite(mean_height_mm) && robust_iterations >= 0 && min_residual_slope > 0.0 &&
+         min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && max_cg_iterations > 0;
+}
+
+namespace {
+
+// DCT-II / its inverse along one line of length n via a complex FFT of length n (Makhoul 1980):
+// v = (x0, x2, x4, ..., x5, x3, x1), X_k = Re(exp(-i pi k / 2n) FFT(v)_k). Buffers are allocated
+// once per plan, so a plan serves every line of a chunk without allocation.
+class DctPlan {
+ public:
+  explicit DctPlan(int n) : n_(n), in_(n), out_(n), twiddle_(n) {
+    for (int k = 0; k < n; ++k) twiddle_[k] = std::polar(1.0, -std::numbers::pi * k / (2.0 * n));
+  }
+
+  void Forward(double* x) {
+    if (n_ <= 1) return;
+    const int half = (n_ + 1) / 2;
+    for (int i = 0; i < half; ++i) in_[i] = x[2 * i];
+    for (int i = 0; 2 * i + 1 < n_; ++i) in_[n_ - 1 - i] = x[2 * i + 1];
+    fft_.fwd(out_.data(), in_.data(), n_);
+    for (int k = 0; k < n_; ++k) x[k] = (twiddle_[k] * out_[k]).real();
+  }
+
+  // Exact inverse of Forward: V_k = exp(i pi k / 2n) (X_k - i X_{n-k}), X_n = 0, then IFFT.
+  void Inverse(double* x) {
+    if (n_ <= 1) return;
+    for (int k = 0; k < n_; ++k) {
+      const double x_mirror = k == 0 ? 0.0 : x[n_ - k];
+      in_[k] = std::conj(twiddle_[k]) * std::complex<double>(x[k], -x_mirror);
+    }
+    fft_.inv(out_.data(), in_.data(), n_);
+    const int half = (n_ + 1) / 2;
+    for (int i = 0; i < half; ++i) x[2 * i] = out_[i].real();
+    for (int i = 0; 2 * i + 1 < n_; ++i) x[2 * i + 1] = out_[n_ - 1 - i].real();
+  }
+
+ private:
+  int n_;
+  Eigen::FFT<double> fft_;
+  std::vector<std::complex<double>> in_, out_, twiddle_;
+};
+
+// Solves L u = f for the unweighted 4-neighbour graph Laplacian of a w x h grid with natural
+// (Neumann) boundary: L is diagonalised by the 2-D DCT-II with eigenvalues
+// (2 - 2 cos(pi kx / w)) + (2 - 2 cos(pi ky / h)). The constant (kx = ky = 0) is set to zero.
+class PoissonDctSolver {
+ public:
+  PoissonDctSolver(int width, int height) : width_(width), height_(height), eig_x_(width), eig_y_(height) {
+    for (int k = 0; k < width; ++k) eig_x_[k] = 2.0 - 2.0 * std::cos(std::numbers::pi * k / width);
+    for (int k = 0; k < height; ++k) eig_y_[k] = 2.0 - 2.0 * std::cos(std::numbers::pi * k / height);
+  }
+
+  void Solve(std::vector<double>& values) const {
+    TransformRows(values, true);
+    TransformColumns(values, true);
+    ParallelFor(height_, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t r = begin; r < end; ++r) {
+        double* row = values.data() + r * width_;
+        for (int c = 0; c < width_; ++c) {
+          const double eig = eig_x_[c] + eig_y_[r];
+          row[c] = eig > 0.0 ? row[c] / eig : 0.0;
+        }
+      }
+    });
+    TransformColumns(values, false);
+    TransformRows(values, false);
+  }
+
+ private:
+  void TransformRows(std::vector<double>& values, bool forward) const {
+    ParallelFor(height_, [&](std::size_t begin, std::size_t end) {
+      DctPlan plan(width_);
+      for (std::size_t r = begin; r < end; ++r) {
+        double* row = values.data() + r * width_;
+        forward ? plan.Forward(row) : plan.Inverse(row);
+      }
+    });
+  }
+
+  // Columns in blocks of kBlock so the strided gather touches whole cache lines.
+  void TransformColumns(std::vector<double>& values, bool forward) const {
+    constexpr int kBlock = 8;
+    const std::size_t blocks = (width_ + kBlock - 1) / kBlock;
+    ParallelFor(blocks, [&](std::size_t begin, std::size_t end) {
+      DctPlan plan(height_);
+      std::vector<double> column(static_cast<std::size_t>(height_) * kBlock);
+      for (std::size_t b = begin; b < end; ++b) {
+        const int c0 = static_cast<int>(b) * kBlock;
+        const int nc = std::min(kBlock, width_ - c0);
+        for (int r = 0; r < height_; ++r)
+          for (int j = 0; j < nc; ++j) column[j * height_ + r] = values[static_cast<std::size_t>(r) * width_ + c0 + j];
+        for (int j = 0; j < nc; ++j) forward ? plan.Forward(&column[j * height_]) : plan.Inverse(&column[j * height_]);
+        for (int r = 0; r < height_; ++r)
+          for (int j = 0; j < nc; ++j) values[static_cast<std::size_t>(r) * width_ + c0 + j] = column[j * height_ + r];
+      }
+    });
+  }
+
+  int width_, height_;
+  std::vector<double> eig_x_, eig_y_;
+};
+
+// The edges of the grid: horizontal edge (r, c) -> (r, c + 1) stored at r * w + c (c < w - 1),
+// vertical edge (r, c) -> (r + 1, c) stored at r * w + c (r < h - 1). target: expected z_j - z_i
+// in mm; weight: w_e of the least-squares energy; base: the mask weight of the edge (0 = cut).
+struct EdgeField {
+  int width = 0, height = 0;
+  std::vector<float> target_x, target_y, weight_x, weight_y, base_x, base_y;
+};
+
+// Deterministic parallel sum over blocks.
+template <typename F>
+double ParallelSum(std::size_t count, F term) {
+  constexpr std::size_t kBlocks = 64;
+  std::vector<double> partial(kBlocks, 0.0);
+  ParallelFor(kBlocks, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      const std::size_t begin = count * b / kBlocks, end = count * (b + 1) / kBlocks;
+      double s = 0.0;
+      for (std::size_t i = begin; i < end; ++i) s += term(i);
+      partial[b] = s;
+    }
+  });
+  double total = 0.0;
+  for (double s : partial) total += s;
+  return total;
+}
+
+// out = A z with A = sum_e w_e (e_i - e_j)(e_i - e_j)^T (weighted graph Laplacian), matrix-free.
+void ApplyLaplacian(const EdgeField& e, const std::vector<double>& z, std::vector<double>& out) {
+  const int w = e.width, h = e.height;
+  ParallelFor(h, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t rr = begin; rr < end; ++rr) {
+      const int r = static_cast<int>(rr);
+      for (int c = 0; c < w; ++c) {
+        const std::size_t i = static_cast<std::size_t>(r) * w + c;
+        double s = 0.0;
+        if (c + 1 < w) s += e.weight_x[i] * (z[i] - z[i + 1]);
+        if (c > 0) s += e.weight_x[i - 1] * (z[i] - z[i - 1]);
+        if (r + 1 < h) s += e.weight_y[i] * (z[i] - z[i + w]);
+        if (r > 0) s += e.weight_y[i - w] * (z[i] - z[i - w]);
+        out[i] = s;
+      }
+    }
+  });
+}
+
+// b_i = sum over edges ending at i of w t - sum over edges starting at i of w t.
+void BuildRightHandSide(const EdgeField& e, bool unit_weights, std::vector<double>& b) {
+  const int w = e.width, h = e.height;
+  ParallelFor(h, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t rr = begin; rr < end; ++rr) {
+      const int r = static_cast<int>(rr);
+      for (int c = 0; c < w; ++c) {
+        const std::size_t i = static_cast<std::size_t>(r) * w + c;
+        auto wt_x = [&](std::size_t k) { return (unit_weights ? 1.0 : e.weight_x[k]) * e.target_x[k]; };
+        auto wt_y = [&](std::size_t k) { return (unit_weights ? 1.0 : e.weight_y[k]) * e.target_y[k]; };
+        double s = 0.0;
+        if (c + 1 < w) s -= wt_x(i);
+        if (c > 0) s += wt_x(i - 1);
+        if (r + 1 < h) s -= wt_y(i);
+        if (r > 0) s += wt_y(i - w);
+        b[i] = s;
+      }
+    }
+  });
+}
+
+void RemoveMean(std::vector<double>& v) {
+  const double mean = ParallelSum(v.size(), [&](std::size_t i) { return v[i]; }) / v.size();
+  ParallelFor(v.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) v[i] -= mean;
+  });
+}
+
+// Preconditioned conjugate gradients on A z = b (A singular with the constants as null space; b
+// sums to zero). Returns iterations; *relative_residual gets |b - Az| / |b|.
+int SolvePcg(const EdgeField& e, const PoissonDctSolver& precond, const std::vector<double>& b,
+             std::vector<double>& z, double tolerance, int max_iterations, double* relative_residual) {
+  const std::size_t n = b.size();
+  std::vector<double> r(n), s(n), p(n), ap(n);
+  ApplyLaplacian(e, z, ap);
+  ParallelFor(n, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - ap[i];
+  });
+  const double b_norm = std::sqrt(ParallelSum(n, [&](std::size_t i) { return b[i] * b[i]; }));
+  if (b_norm == 0.0) {
+    *relative_residual = 0.0;
+    return 0;
+  }
+  double r_norm = std::sqrt(ParallelSum(n, [&](std::size_t i) { return r[i] * r[i]; }));
+  *relative_residual = r_norm / b_norm;
+  if (*relative_residual <= tolerance) return 0;
+  s = r;
+  precond.Solve(s);
+  p = s;
+  double rs = ParallelSum(n, [&](std::size_t i) { return r[i] * s[i]; });
+  int it = 0;
+  while (it < max_iterations) {
+    ++it;
+    ApplyLaplacian(e, p, ap);
+    const double pap = ParallelSum(n, [&](std::size_t i) { return p[i] * ap[i]; });
+    if (!(pap > 0.0)) break;
+    const double alpha = rs / pap;
+    ParallelFor(n, [&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) {
+        z[i] += alpha * p[i];
+        r[i] -= alpha * ap[i];
+      }
+    });
+    r_norm = std::sqrt(ParallelSum(n, [&](std::size_t i) { return r[i] * r[i]; }));
+    *relative_residual = r_norm / b_norm;
+    if (*relative_residual <= tolerance) break;
+    s = r;
+    precond.Solve(s);
+    const double rs_new = ParallelSum(n, [&](std::size_t i) { return r[i] * s[i]; });
+    const double beta = rs_new / rs;
+    rs = rs_new;
+    ParallelFor(n, [&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) p[i] = s[i] + beta * p[i];
+    });
+  }
+  return it;
+}
+
+// Median of |x| over a bounded subsample (at most ~1M values), for the robust residual scale.
+double MedianAbs(const std::vector<float>& values) {
+  if (values.empty()) return 0.0;
+  constexpr std::size_t kMaxSamples = 1u << 20;
+  const std::size_t stride = std::max<std::size_t>(1, values.size() / kMaxSamples);
+  std::vector<float> sample;
+  sample.reserve(values.size() / stride + 1);
+  for (std::size_t i = 0; i < values.size(); i += stride) sample.push_back(std::fabs(values[i]));
+  auto mid = sample.begin() + sample.size() / 2;
+  std::nth_element(sample.begin(), mid, sample.end());
+  return *mid;
+}
+
+}  // namespace
+
+namespace internal {
+void DctLine(double* values, int n) { DctPlan(n).Forward(values); }
+void InverseDctLine(double* values, int n) { DctPlan(n).Inverse(values); }
+}  // namespace internal
+
+IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const IntegrationOptions& options,
+                                   const ProgressCallback& progress) {
+  if (!options.Check()) throw std::invalid_argument("IntegrateNormals: options fail Check()");
+  if (normal.channels() != 3) throw std::invalid_argument("IntegrateNormals: normal map needs 3 channels");
+  const int w = normal.width(), h = normal.height();
+  if (w <= 0 || h <= 0) throw std::invalid_argument("IntegrateNormals: empty normal map");
+  if (!mask.empty() && (mask.width() != w || mask.height() != h))
+    throw std::invalid_argument("IntegrateNormals: mask size differs from the normal map");
+  const double pitch_mm = options.pitch_mm > 0.0 ? options.pitch_mm : normal.pitch_mm();
+  if (!(pitch_mm > 0.0)) throw std::invalid_argument("IntegrateNormals: pixel pitch unknown (set pitch_mm)");
+
+  const std::size_t n = normal.pixel_count();
+  // Per-pixel slopes (mm per mm) and weights; invalid pixels get weight 0.
+  std::vector<float> slope_x(n), slope_y(n), pixel_weight(n);
+  const double m = options.min_normal_z;
+  const double max_tangent = std::sqrt(1.0 - m * m);
+  ParallelFor(n, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      double nx = normal.data()[i], ny = normal.data()[n + i], nz = normal.data()[2 * n + i];
+      double wgt = 1.0;
+      if (!mask.empty()) {
+        const float mv = mask.data()[i];
+        wgt = std::isfinite(mv) ? std::clamp(static_cast<double>(mv), 0.0, 1.0) : 0.0;
+      }
+      const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
+      if (!std::isfinite(len) || len < 1e-12) {
+        slope_x[i] = slope_y[i] = 0.0f;
+        pixel_weight[i] = 0.0f;
+        continue;
+      }
+      nx /= len, ny /= len, nz /= len;
+      if (nz < m) {  // grazing or facing away: keep the azimuth, clamp the tilt
+        const double t = std::sqrt(nx * nx + ny * ny);
+        if (t > 0.0) nx *= max_tangent / t, ny *= max_tangent / t;
+        nz = m;
+      }
+      slope_x[i] = static_cast<float>(-nx / nz);
+      slope_y[i] = static_cast<float>(-ny / nz);
+      pixel_weight[i] = static_cast<float>(wgt);
+    }
+  });
+
+  EdgeField e;
+  e.width = w, e.height = h;
+  for (auto* v : {&e.target_x, &e.target_y, &e.weight_x, &e.weight_y, &e.base_x, &e.base_y}) v->assign(n, 0.0f);
+  bool all_unit = true;
+  ParallelFor(h, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t rr = begin; rr < end; ++rr) {
+      const int r = static_cast<int>(rr);
+      for (int c = 0; c < w; ++c) {
+        const std::size_t i = static_cast<std::size_t>(r) * w + c;
+        if (c + 1 < w) {
+          const float base = std::min(pixel_weight[i], pixel_weight[i + 1]);
+          e.base_x[i] = base;
+          // Columns grow with +x: z(c + 1) - z(c) = p dz/dx.
+          e.target_x[i] = base > 0.0f ? static_cast<float>(0.5 * pitch_mm * (slope_x[i] + slope_x[i + 1])) : 0.0f;
+        }
+        if (r + 1 < h) {
+          const float base = std::min(pixel_weight[i], pixel_weight[i + w]);
+          e.base_y[i] = base;
+          // Rows grow with -y: z(r + 1) - z(r) = -p dz/dy.
+          e.target_y[i] = base > 0.0f ? static_cast<float>(-0.5 * pitch_mm * (slope_y[i] + slope_y[i + w])) : 0.0f;
+        }
+      }
+    }
+  });
+  for (std::size_t i = 0; i < n && all_unit; ++i) all_unit = pixel_weight[i] == 1.0f;
+  slope_x = {};
+  slope_y = {};
+
+  const float min_w = static_cast<float>(options.min_edge_weight);
+  auto set_weights_from_base = [&] {
+    for (std::size_t i = 0; i < n; ++i) {
+      e.weight_x[i] = std::max(e.base_x[i], min_w);
+      e.weight_y[i] = std::max(e.base_y[i], min_w);
+    }
+  };
+  set_weights_from_base();
+
+  IntegrationResult result;
+  const PoissonDctSolver dct(w, h);
+  std::vector<double> z(n), b(n);
+  // Start: the exact unweighted solve (the whole answer for kDct without a mask).
+  BuildRightHandSide(e, /*unit_weights=*/true, b);
+  z = b;
+  dct.Solve(z);
+  ReportProgress(progress, "integration", 0.1);
+  if (!all_unit) {
+    BuildRightHandSide(e, false, b);
+    RemoveMean(b);
+    result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
+                                     &result.relative_residual);
+  }
+
+  std::vector<float> robust_x(n, 1.0f), robust_y(n, 1.0f);
+  if (options.method == Integrator::kRobust) {
+    std::vector<float> residuals;
+    residuals.reserve(2 * n);
+    for (int round = 0; round < options.robust_iterations; ++round) {
+      residuals.clear();
+      for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+          const std::size_t i = static_cast<std::size_t>(r) * w + c;
+          if (c + 1 < w && e.base_x[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + 1] - z[i] - e.target_x[i]));
+          if (r + 1 < h && e.base_y[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + w] - z[i] - e.target_y[i]));
+        }
+      const double sigma = std::max(kMadToSigma * MedianAbs(residuals), options.min_residual_slope * pitch_mm);
+      double max_change = 0.0;
+      for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+          const std::size_t i = static_cast<std::size_t>(r) * w + c;
+          if (c + 1 < w) {
+            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
+            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_x[i])));
+            robust_x[i] = rw;
+            e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
+          }
+          if (r + 1 < h) {
+            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
+            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_y[i])));
+            robust_y[i] = rw;
+            e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
+          }
+        }
+      ++result.robust_iterations;
+      if (round > 0 && max_change < 1e-3) break;  // weights settled: the last solve stands
+      BuildRightHandSide(e, false, b);
+      RemoveMean(b);
+      result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
+                                       &result.relative_residual);
+      ReportProgress(progress, "integration", 0.1 + 0.9 * (round + 1) / options.robust_iterations);
+    }
+  }
+
+  // Anchor: mean over the valid pixels.
+  double sum = 0.0, count = 0.0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (pixel_weight[i] > 0.0f) sum += z[i], count += 1.0;
+  const double shift = options.mean_height_mm - (count > 0.0 ? sum / count : 0.0);
+
+  result.height_mm = Image(w, h, 1, 0.0f, pitch_mm);
+  result.edge_confidence = Image(w, h, 1, 0.0f, pitch_mm);
+  float* out = result.height_mm.data().data();
+  float* conf = result.edge_confidence.data().data();
+  for (int r = 0; r < h; ++r)
+    for (int c = 0; c < w; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * w + c;
+      const double v = z[i] + shift;
+      out[i] = std::isfinite(v) ? static_cast<float>(v) : static_cast<float>(options.mean_height_mm);
+      if (pixel_weight[i] <= 0.0f) continue;
+      float cmin = 1.0f;
+      if (c + 1 < w && e.base_x[i] > 0.0f) cmin = std::min(cmin, robust_x[i]);
+      if (c > 0 && e.base_x[i - 1] > 0.0f) cmin = std::min(cmin, robust_x[i - 1]);
+      if (r + 1 < h && e.base_y[i] > 0.0f) cmin = std::min(cmin, robust_y[i]);
+      if (r > 0 && e.base_y[i - w] > 0.0f) cmin = std::min(cmin, robust_y[i - w]);
+      conf[i] = cmin * pixel_weight[i];
+    }
+  ReportProgress(progress, "integration", 1.0);
+  return result;
+}
+
+}  // namespace u3mscan::reconstruction
