@@ -1,6 +1,8 @@
 #include "reconstruction/photometric_stereo.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -82,7 +84,9 @@ struct PixelSystem {
   Matrix3d eigenvectors = Matrix3d::Identity();
   double weight_sum = 0.0;
 
-  void Build(const std::vector<PixelObservation>& obs) {
+  // decompose = false skips the eigen-decomposition (IRLS rounds solve with a Cholesky factor;
+  // only the final system needs eigenvalues for the condition number and the pseudo-inverse).
+  void Build(const std::vector<PixelObservation>& obs, bool decompose = true) {
     a.setZero();
     r.setZero();
     weight_sum = 0.0;
@@ -92,6 +96,10 @@ struct PixelSystem {
       r.noalias() += o.weight * o.s * o.rgb.transpose();
       weight_sum += o.weight;
     }
+    if (decompose) Decompose();
+  }
+
+  void Decompose() {
     Eigen::SelfAdjointEigenSolver<Matrix3d> es;
     es.computeDirect(a);
     eigenvalues = es.eigenvalues().cwiseMax(0.0);  // ascending
@@ -231,12 +239,18 @@ class Solver {
         o.weight = w;
       }
       PixelSystem next;
-      next.Build(obs);
-      if (!(next.eigenvalues(0) > 1e-12 * next.eigenvalues(2))) break;  // weights left < 3 lights: keep the last good system
-      sys = next;
-      b = sys.Solve();
-      if (change < 1e-4) break;
+      next.Build(obs, /*decompose=*/false);
+      // Weights left fewer than 3 independent lights: keep the last good system.
+      const Eigen::LLT<Matrix3d> llt(next.a);
+      const double scale = next.a.trace();
+      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) break;
+      sys.a = next.a;
+      sys.r = next.r;
+      sys.weight_sum = next.weight_sum;
+      b = llt.solve(next.r);
+      if (change < 1e-3) break;
     }
+    sys.Decompose();
   }
 
   // Per-channel albedo for a fixed normal: rho_c = pi * sum w rgb_c m / sum w m^2, m = max(0, s.n).
