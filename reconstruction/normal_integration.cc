@@ -28,12 +28,75 @@ bool IntegrationOptions::Check() const {
 
 namespace {
 
+// Complex FFT of one length. Eigen's FFT (kissfft) is fast for lengths made of small primes but
+// O(n p) for a large prime factor p; such lengths (e.g. 3543 = 3 x 1181 pixels) go through
+// Bluestein's chirp-z algorithm: a circular convolution of power-of-two length >= 2n - 1.
+class ComplexFft {
+ public:
+  explicit ComplexFft(int n) : n_(n) {
+    if (LargestPrimeFactor(n) <= kSmallPrime) return;
+    m_ = 1;
+    while (m_ < 2 * n - 1) m_ *= 2;
+    chirp_.resize(n);
+    for (int k = 0; k < n; ++k) {
+      // exp(-i pi k^2 / n), with k^2 reduced mod 2n so the angle stays exact for long lines.
+      const long long k2 = (static_cast<long long>(k) * k) % (2LL * n);
+      chirp_[k] = std::polar(1.0, -std::numbers::pi * static_cast<double>(k2) / n);
+    }
+    std::vector<std::complex<double>> b(m_, 0.0);
+    b[0] = std::conj(chirp_[0]);
+    for (int k = 1; k < n; ++k) b[k] = b[m_ - k] = std::conj(chirp_[k]);
+    kernel_.resize(m_);
+    fft_.fwd(kernel_.data(), b.data(), m_);
+    work_.resize(m_);
+    spectrum_.resize(m_);
+  }
+
+  void Forward(std::complex<double>* out, const std::complex<double>* in) {
+    if (m_ == 0) {
+      fft_.fwd(out, in, n_);
+      return;
+    }
+    std::fill(work_.begin(), work_.end(), 0.0);
+    for (int k = 0; k < n_; ++k) work_[k] = in[k] * chirp_[k];
+    fft_.fwd(spectrum_.data(), work_.data(), m_);
+    for (int k = 0; k < m_; ++k) spectrum_[k] *= kernel_[k];
+    fft_.inv(work_.data(), spectrum_.data(), m_);
+    for (int k = 0; k < n_; ++k) out[k] = work_[k] * chirp_[k];
+  }
+
+  // Inverse with 1/n scaling, through the forward transform of the conjugate.
+  void Inverse(std::complex<double>* out, const std::complex<double>* in) {
+    if (m_ == 0) {
+      fft_.inv(out, in, n_);
+      return;
+    }
+    for (int k = 0; k < n_; ++k) out[k] = std::conj(in[k]);
+    Forward(out, out);
+    for (int k = 0; k < n_; ++k) out[k] = std::conj(out[k]) / static_cast<double>(n_);
+  }
+
+ private:
+  static constexpr int kSmallPrime = 13;
+  static int LargestPrimeFactor(int n) {
+    int largest = 1;
+    for (int p = 2; static_cast<long long>(p) * p <= n; ++p)
+      while (n % p == 0) largest = p, n /= p;
+    return std::max(largest, n);
+  }
+
+  int n_;
+  int m_ = 0;  // Bluestein length; 0 = direct
+  Eigen::FFT<double> fft_;
+  std::vector<std::complex<double>> chirp_, kernel_, work_, spectrum_;
+};
+
 // DCT-II / its inverse along one line of length n via a complex FFT of length n (Makhoul 1980):
 // v = (x0, x2, x4, ..., x5, x3, x1), X_k = Re(exp(-i pi k / 2n) FFT(v)_k). Buffers are allocated
 // once per plan, so a plan serves every line of a chunk without allocation.
 class DctPlan {
  public:
-  explicit DctPlan(int n) : n_(n), in_(n), out_(n), twiddle_(n) {
+  explicit DctPlan(int n) : n_(n), fft_(n), in_(n), out_(n), twiddle_(n) {
     for (int k = 0; k < n; ++k) twiddle_[k] = std::polar(1.0, -std::numbers::pi * k / (2.0 * n));
   }
 
@@ -42,7 +105,7 @@ class DctPlan {
     const int half = (n_ + 1) / 2;
     for (int i = 0; i < half; ++i) in_[i] = x[2 * i];
     for (int i = 0; 2 * i + 1 < n_; ++i) in_[n_ - 1 - i] = x[2 * i + 1];
-    fft_.fwd(out_.data(), in_.data(), n_);
+    fft_.Forward(out_.data(), in_.data());
     for (int k = 0; k < n_; ++k) x[k] = (twiddle_[k] * out_[k]).real();
   }
 
@@ -53,7 +116,7 @@ class DctPlan {
       const double x_mirror = k == 0 ? 0.0 : x[n_ - k];
       in_[k] = std::conj(twiddle_[k]) * std::complex<double>(x[k], -x_mirror);
     }
-    fft_.inv(out_.data(), in_.data(), n_);
+    fft_.Inverse(out_.data(), in_.data());
     const int half = (n_ + 1) / 2;
     for (int i = 0; i < half; ++i) x[2 * i] = out_[i].real();
     for (int i = 0; 2 * i + 1 < n_; ++i) x[2 * i + 1] = out_[n_ - 1 - i].real();
@@ -61,7 +124,7 @@ class DctPlan {
 
  private:
   int n_;
-  Eigen::FFT<double> fft_;
+  ComplexFft fft_;
   std::vector<std::complex<double>> in_, out_, twiddle_;
 };
 
