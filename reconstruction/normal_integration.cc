@@ -425,8 +425,11 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
                                      &result.relative_residual);
   }
 
-  std::vector<float> robust_x(n, 1.0f), robust_y(n, 1.0f);
+  // Robust weights per edge; left empty (all 1) for kDct.
+  std::vector<float> robust_x, robust_y;
   if (options.method == Integrator::kRobust) {
+    robust_x.assign(n, 1.0f);
+    robust_y.assign(n, 1.0f);
     std::vector<float> residuals;
     residuals.reserve(2 * n);
     for (int round = 0; round < options.robust_iterations; ++round) {
@@ -482,10 +485,12 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
       out[i] = std::isfinite(v) ? static_cast<float>(v) : static_cast<float>(options.mean_height_mm);
       if (pixel_weight[i] <= 0.0f) continue;
       float cmin = 1.0f;
-      if (c + 1 < w && e.base_x[i] > 0.0f) cmin = std::min(cmin, robust_x[i]);
-      if (c > 0 && e.base_x[i - 1] > 0.0f) cmin = std::min(cmin, robust_x[i - 1]);
-      if (r + 1 < h && e.base_y[i] > 0.0f) cmin = std::min(cmin, robust_y[i]);
-      if (r > 0 && e.base_y[i - w] > 0.0f) cmin = std::min(cmin, robust_y[i - w]);
+      if (!robust_x.empty()) {
+        if (c + 1 < w && e.base_x[i] > 0.0f) cmin = std::min(cmin, robust_x[i]);
+        if (c > 0 && e.base_x[i - 1] > 0.0f) cmin = std::min(cmin, robust_x[i - 1]);
+        if (r + 1 < h && e.base_y[i] > 0.0f) cmin = std::min(cmin, robust_y[i]);
+        if (r > 0 && e.base_y[i - w] > 0.0f) cmin = std::min(cmin, robust_y[i - w]);
+      }
       conf[i] = cmin * pixel_weight[i];
     }
   ReportProgress(progress, "integration", 1.0);

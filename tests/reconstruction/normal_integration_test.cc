@@ -130,7 +130,9 @@ TEST(IntegrateNormals, RecoversSinusoidWithBothIntegrators) {
     IntegrationOptions options;
     options.method = method;
     const IntegrationResult result = IntegrateNormals(n, Image(), options);
-    EXPECT_LT(RmsErrorMm(result.height_mm, s) / range_mm, kSinusoidRelativeTolerance) << IntegratorName(method);
+    const double relative = RmsErrorMm(result.height_mm, s) / range_mm;
+    std::printf("sinusoid 64x64: %s RMS height error %.5f of the range\n", IntegratorName(method).c_str(), relative);
+    EXPECT_LT(relative, kSinusoidRelativeTolerance) << IntegratorName(method);
   }
 }
 
