@@ -311,16 +311,12 @@ int SolvePcg(const EdgeField& e, const PoissonDctSolver& precond, const std::vec
   return it;
 }
 
-// Median of |x| over a bounded subsample (at most ~1M values), for the robust residual scale.
-double MedianAbs(const std::vector<float>& values) {
+// Median of |x| (reorders the values), for the robust residual scale.
+double MedianAbs(std::vector<float>& values) {
   if (values.empty()) return 0.0;
-  constexpr std::size_t kMaxSamples = 1u << 20;
-  const std::size_t stride = std::max<std::size_t>(1, values.size() / kMaxSamples);
-  std::vector<float> sample;
-  sample.reserve(values.size() / stride + 1);
-  for (std::size_t i = 0; i < values.size(); i += stride) sample.push_back(std::fabs(values[i]));
-  auto mid = sample.begin() + sample.size() / 2;
-  std::nth_element(sample.begin(), mid, sample.end());
+  for (float& v : values) v = std::fabs(v);
+  auto mid = values.begin() + values.size() / 2;
+  std::nth_element(values.begin(), mid, values.end());
   return *mid;
 }
 
@@ -430,34 +426,44 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
   if (options.method == Integrator::kRobust) {
     robust_x.assign(n, 1.0f);
     robust_y.assign(n, 1.0f);
-    std::vector<float> residuals;
-    residuals.reserve(2 * n);
+    // The residual scale from a bounded sample of the in-region edges (every stride-th pixel), so
+    // no plane of residuals is stored; the weights are then updated in parallel over rows.
+    constexpr std::size_t kMaxSamples = 1u << 20;
+    const std::size_t stride = std::max<std::size_t>(1, 2 * n / kMaxSamples);
+    std::vector<float> sample;
+    sample.reserve(2 * n / stride + 2);
+    std::vector<double> row_change(h);
     for (int round = 0; round < options.robust_iterations; ++round) {
-      residuals.clear();
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c) {
-          const std::size_t i = static_cast<std::size_t>(r) * w + c;
-          if (c + 1 < w && e.base_x[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + 1] - z[i] - e.target_x[i]));
-          if (r + 1 < h && e.base_y[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + w] - z[i] - e.target_y[i]));
-        }
-      const double sigma = std::max(kMadToSigma * MedianAbs(residuals), options.min_residual_slope * pitch_mm);
-      double max_change = 0.0;
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c) {
-          const std::size_t i = static_cast<std::size_t>(r) * w + c;
-          if (c + 1 < w) {
-            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
-            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_x[i])));
-            robust_x[i] = rw;
-            e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
+      sample.clear();
+      for (std::size_t i = 0; i < n; i += stride) {
+        const int r = static_cast<int>(i / w), c = static_cast<int>(i % w);
+        if (c + 1 < w && e.base_x[i] > 0.0f) sample.push_back(static_cast<float>(z[i + 1] - z[i] - e.target_x[i]));
+        if (r + 1 < h && e.base_y[i] > 0.0f) sample.push_back(static_cast<float>(z[i + w] - z[i] - e.target_y[i]));
+      }
+      const double sigma = std::max(kMadToSigma * MedianAbs(sample), options.min_residual_slope * pitch_mm);
+      ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
+        for (std::size_t rr = r0; rr < r1; ++rr) {
+          const int r = static_cast<int>(rr);
+          double change = 0.0;
+          for (int c = 0; c < w; ++c) {
+            const std::size_t i = static_cast<std::size_t>(r) * w + c;
+            if (c + 1 < w) {
+              const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
+              change = std::max(change, static_cast<double>(std::fabs(rw - robust_x[i])));
+              robust_x[i] = rw;
+              e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
+            }
+            if (r + 1 < h) {
+              const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
+              change = std::max(change, static_cast<double>(std::fabs(rw - robust_y[i])));
+              robust_y[i] = rw;
+              e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
+            }
           }
-          if (r + 1 < h) {
-            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
-            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_y[i])));
-            robust_y[i] = rw;
-            e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
-          }
+          row_change[rr] = change;
         }
+      });
+      const double max_change = *std::max_element(row_change.begin(), row_change.end());
       ++result.robust_iterations;
       if (round > 0 && max_change < 1e-3) break;  // weights settled: the last solve stands
       BuildRightHandSide(e, false, b);
