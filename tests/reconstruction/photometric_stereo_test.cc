@@ -191,6 +191,22 @@ TEST(PhotometricStereo, GrazingLightsStayFinite) {
   }
 }
 
+TEST(PhotometricStereo, NearlyVerticalSurfaceIsClampedNotInfinite) {
+  const MetricGrid grid = Grid(8, 8, kPitchMm);
+  // A wall tilted 88 deg toward +x (n_z = 0.035): lit by the lights on its side only.
+  const double slope = std::tan(88.0 * std::numbers::pi / 180.0);
+  const HeightField wall{[=](double x, double) { return -slope * x; }, [=](double, double) { return -slope; },
+                         [](double, double) { return 0.0; }};
+  const Stack stack = RenderStack(grid, Ring(12, 20.0, 40.0, Directional), wall);
+  const PhotometricStereoOptions options = Options(PsSolver::kRobust);
+  const PhotometricStereoResult res = RunPhotometricStereo(stack, options);
+  ExpectSane(res);
+  EXPECT_EQ(res.clamped_normal_pixels, 64);
+  EXPECT_NEAR(res.normal.at(2, 4, 4), options.min_normal_z, 1e-6);
+  EXPECT_GT(res.normal.at(0, 4, 4), 0.99f);  // the azimuth is kept
+  EXPECT_LT(MaxOf(res.confidence), 1.0);
+}
+
 TEST(PhotometricStereo, NearlyCoplanarLightsGiveLowConfidence) {
   const MetricGrid grid = Grid(16, 16, kPitchMm);
   std::vector<LightModel> lights;
