@@ -47,6 +47,9 @@ constexpr double kMaxNormalLength = 1.5;
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
+// Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
+// whose cost does not drop within them keeps the cluster value; this is the cheap stage).
+constexpr double kMinStepScale = 0.3;
 // Largest number of parameters the per-pixel step refines (roughness, specular).
 constexpr int kMaxPixelParameters = 2;
 
@@ -450,27 +453,36 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
 // cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
 // residual buffers come from the caller. Returns which parameters were kept.
+// `color` receives the closed-form base colour at the returned parameters (saves a solve).
 int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
                 double luminance_start, const ParameterVector& cluster, ParameterVector& params,
-                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac) {
+                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color) {
   int index[kMaxPixelParameters];
   int k = 0;
   if (measured[kRoughness]) index[k++] = kRoughness;
-  if (measured[kSpecular]) index[k++] = kSpecular;
-  if (k == 0) return 0;
+  if (measured[kSpecular] && options.refine_specular_per_pixel) index[k++] = kSpecular;
+  const PixelCostSettings settings = Settings(options, cluster, measured, luminance_start);
+  if (k == 0) {
+    *color = SolveBaseColor(params, obs, settings);
+    return 0;
+  }
   const std::size_t m = 3 * obs.size();
   r0.resize(m);
   r1.resize(m);
   jac.resize(m * k);
-  const PixelCostSettings settings = Settings(options, cluster, measured, luminance_start);
   const double prior_w = 1.0 / (options.pixel_prior_std * options.pixel_prior_std);
-  auto total = [&](const ParameterVector& p, std::vector<double>& r) {
-    double c = PixelResiduals(p, obs, settings, r.data());
+  auto total = [&](const ParameterVector& p, std::vector<double>& r, Eigen::Vector3d* c_out) {
+    double c = PixelResiduals(p, obs, settings, r.data(), c_out);
     for (int a = 0; a < k; ++a) c += 0.5 * prior_w * (p[index[a]] - cluster[index[a]]) * (p[index[a]] - cluster[index[a]]);
     return c;
   };
-  Eigen::Matrix<double, kMaxPixelParameters, kMaxPixelParameters> h;
-  double cost = total(params, r0);
+  // Fixed-size normal equations (no allocation per pixel); unused rows are identity.
+  using Matrix2 = Eigen::Matrix<double, kMaxPixelParameters, kMaxPixelParameters>;
+  using Vector2 = Eigen::Matrix<double, kMaxPixelParameters, 1>;
+  Matrix2 h = Matrix2::Identity();
+  double cost = total(params, r0, color);
+  const ParameterVector start = params;
+  const Eigen::Vector3d start_color = *color;
   for (int it = 0; it < options.pixel_iterations; ++it) {
     for (int a = 0; a < k; ++a) {
       ParameterVector q = params;
@@ -479,8 +491,8 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
       PixelResiduals(q, obs, settings, r1.data());
       for (std::size_t i = 0; i < m; ++i) jac[a * m + i] = (r1[i] - r0[i]) / step;
     }
-    h.setZero();
-    Eigen::Matrix<double, kMaxPixelParameters, 1> g = Eigen::Matrix<double, kMaxPixelParameters, 1>::Zero();
+    h.setIdentity();
+    Vector2 g = Vector2::Zero();
     for (int a = 0; a < k; ++a) {
       for (int b = 0; b <= a; ++b) {
         double s = 0.0;
@@ -492,16 +504,22 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
       g(a) = s + prior_w * (params[index[a]] - cluster[index[a]]);
       h(a, a) += prior_w;
     }
-    const auto hk = h.topLeftCorner(k, k);
-    const Eigen::VectorXd delta = -hk.ldlt().solve(g.head(k));
+    // No step where even the best case cannot pin the value down (cheap stage: skip early).
+    const Matrix2 covariance = h.inverse();
+    bool supported = false;
+    for (int a = 0; a < k; ++a) supported = supported || std::sqrt(std::max(0.0, covariance(a, a))) < options.pixel_max_std;
+    if (!supported) break;
+    const Vector2 delta = -h.ldlt().solve(g);
     if (!delta.allFinite()) break;
     // Step halving keeps the damped step a descent step.
     bool accepted = false;
-    for (double scale = 1.0; scale > 0.1 && !accepted; scale *= 0.5) {
+    for (double scale = 1.0; scale > kMinStepScale && !accepted; scale *= 0.5) {
       ParameterVector q = params;
       for (int a = 0; a < k; ++a) q[index[a]] = std::clamp(q[index[a]] + scale * delta(a), 0.0, 1.0);
-      const double c = total(q, r1);
+      Eigen::Vector3d c_color;
+      const double c = total(q, r1, &c_color);
       if (c < cost) {
+        *color = c_color;
         params = q;
         cost = c;
         std::swap(r0, r1);
@@ -511,7 +529,7 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     if (!accepted) break;
   }
   // Keep a refined value only where the pixel's own data pins it down.
-  const Eigen::MatrixXd covariance = h.topLeftCorner(k, k).inverse();
+  const Matrix2 covariance = h.inverse();  // h of the last linearisation (identity rows unused)
   int kept = 0;
   for (int a = 0; a < k; ++a) {
     const double sd = std::sqrt(std::max(0.0, covariance(a, a)));
@@ -520,6 +538,11 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     } else {
       params[index[a]] = cluster[index[a]];
     }
+  }
+  if (kept < k && params != start) {
+    *color = SolveBaseColor(params, obs, settings);  // a partial revert changes the colour
+  } else if (params == start) {
+    *color = start_color;
   }
   return kept;
 }
@@ -707,15 +730,16 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         ++local_fitted;
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
         ParameterVector params = cluster_params[c];
+        Eigen::Vector3d color;
         if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
           if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
-                          jac) > 0) {
+                          jac, &color) > 0) {
             ++local_refined;
           }
+        } else {
+          color = SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
         }
-        const Eigen::Vector3d color =
-            SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
         for (int ch = 0; ch < 3; ++ch) {
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
           result.base_color.at(ch, row, col) = static_cast<float>(v);
