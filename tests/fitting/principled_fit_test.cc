@@ -78,6 +78,22 @@ void ExpectRecovered(const Scene& scene, const FitResult& result, FitParameter p
   EXPECT_LT(worst, tolerance) << FitParameterName(parameter);
 }
 
+// Mean absolute error of a parameter over fitted pixels (left-out maps count with their value).
+double MeanAbsError(const Scene& scene, const FitResult& result, FitParameter parameter) {
+  const int width = scene.stack.grid.width;
+  const Image& map = result.map(parameter);
+  double sum = 0.0;
+  int n = 0;
+  for (std::size_t i = 0; i < scene.truth.size(); ++i) {
+    const int row = static_cast<int>(i / width), col = static_cast<int>(i % width);
+    if (result.cluster_id.at(0, row, col) < 0.0f) continue;
+    const double fitted = map.empty() ? result.report(parameter).value : map.at(0, row, col);
+    sum += std::abs(fitted - TruthValue(scene.truth[i], parameter));
+    ++n;
+  }
+  return n > 0 ? sum / n : 0.0;
+}
+
 void ExpectBaseColorRecovered(const Scene& scene, const FitResult& result) {
   const int width = scene.stack.grid.width;
   double worst = 0.0;
@@ -186,9 +202,10 @@ TEST_F(PrincipledFitTest, ObliqueViewRecoversSheen) {
   ExpectBaseColorRecovered(scene, result);
 }
 
-TEST_F(PrincipledFitTest, UniformSampleGivesConstantMaps) {
+TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
   SceneSpec spec;
   spec.lights_deg = OverheadLights();
+  spec.point_light_distance_mm = 30.0;  // near lights: direction and 1/d^2 vary over the 1.6 mm grid
   spec.material = [](int col, int row) {
     PrincipledParams<double> p;
     p.base_color = Eigen::Vector3d(0.4, 0.35, 0.3) * (1.0 + 0.05 * std::cos(0.7 * col * row));
@@ -198,7 +215,7 @@ TEST_F(PrincipledFitTest, UniformSampleGivesConstantMaps) {
   };
   const Scene scene = MakeScene(spec);
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
-  MaybePrint("UniformSampleGivesConstantMaps", result);
+  MaybePrint("UniformSampleUnderPointLightsGivesConstantMaps", result);
   const MapReport& roughness = result.report(FitParameter::kRoughness);
   EXPECT_TRUE(roughness.measured);
   EXPECT_TRUE(roughness.constant) << roughness.reason;
@@ -296,6 +313,54 @@ TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
   FitOptions options;
   options.noise_relative = -1.0;
   EXPECT_THROW(FitPrincipled(scene.stack, scene.geometry, options), std::invalid_argument);
+}
+
+// The issue's accuracy targets on a capture with sensor-like noise: 1 % Gaussian per channel
+// (seeded), oblique rig, four lights held out of the fit.
+constexpr double kNoiseRelative = 0.01;
+constexpr double kTargetRoughnessError = 0.05;
+constexpr double kTargetSpecularError = 0.1;
+constexpr double kTargetSheenError = 0.1;
+// Held-out images compared with the noise-free truth: noise does not count against the fit.
+
+TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.oblique_view = true;
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
+  const Scene scene = MakeScene(spec);
+  const std::set<int> held_out = {1, 6, 11, 18};
+  Stack noisy = WithoutLights(scene.stack, held_out);
+  std::mt19937 rng(23);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(kNoiseRelative));
+  for (Observation& o : noisy.observations) {
+    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
+  }
+  const FitResult result = FitPrincipled(noisy, scene.geometry, FitOptions());
+  MaybePrint("NoisyCaptureMeetsTheIssueTargets", result);
+  ExpectFinite(result);
+  const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
+  const double specular = MeanAbsError(scene, result, FitParameter::kSpecular);
+  const double sheen = MeanAbsError(scene, result, FitParameter::kSheen);
+  EXPECT_TRUE(result.report(FitParameter::kSheen).measured);
+  EXPECT_LT(roughness, kTargetRoughnessError);
+  EXPECT_LT(specular, kTargetSpecularError);
+  EXPECT_LT(sheen, kTargetSheenError);
+  double worst_rmse = 0.0;
+  for (const Observation& o : scene.stack.observations) {
+    if (!held_out.count(o.light)) continue;
+    const double rmse = RelativeRmse(RenderFitted(result, scene.stack, scene.geometry, o), o.rgb);
+    worst_rmse = std::max(worst_rmse, rmse);
+    if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) std::cout << "held-out view " << o.view << " light " << o.light << " rmse " << rmse << "\n";
+  }
+  EXPECT_LT(worst_rmse, kHeldOutRelativeRmse);
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "noisy: mean |error| roughness " << roughness << ", specular " << specular << ", sheen " << sheen
+              << ", specular_tint " << MeanAbsError(scene, result, FitParameter::kSpecularTint) << ", sheen_tint "
+              << MeanAbsError(scene, result, FitParameter::kSheenTint) << "; worst held-out relative RMSE "
+              << worst_rmse << "\n";
+  }
 }
 
 // Throughput check, not a correctness test (no test asserts time): a 512 x 512 grid (0.26 MP)

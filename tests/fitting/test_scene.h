@@ -1,7 +1,8 @@
 #pragma once
 // Tiny synthetic stacks for the fitting tests, rendered here with the core BRDF (not with the
 // fitter's own code paths): a bumpy height field on a metric grid, per-pixel Principled parameters
-// from a material function, directional lights, an overhead and optionally an oblique camera.
+// from a material function, directional or point lights, an overhead and optionally an oblique
+// camera.
 //
 // Shading frame convention (docs/fitting.md): z = normal, x = world +x projected into the tangent
 // plane. World: z toward the overhead camera, lengths in mm.
@@ -39,6 +40,9 @@ struct SceneSpec {
   double oblique_view_deg = 60.0;  // camera angle from the sample normal, azimuth 0 (+x side)
   // Values at or above this are clipped and flagged kSaturated (<= 0: no saturation).
   double white_level = 0.0;
+  // > 0: point lights at this distance (mm) from the grid centre in the directions above, with a
+  // cos^2 emission profile aimed at the centre; rgb then scales with 1/d^2 (core LightModel).
+  double point_light_distance_mm = 0.0;
   MaterialFn material;
 };
 
@@ -80,7 +84,7 @@ inline Eigen::Vector3d LightDirection(double elevation_deg, double azimuth_deg) 
   return {std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)};
 }
 
-// Renders one observation with the core BRDF: rgb = f * cos_l * E (E = 1, directional lights).
+// Renders one observation with the core BRDF: rgb = f * cos_l * E (E = 1 for directional lights).
 inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, int view, int light) {
   const Stack& stack = scene.stack;
   Observation o;
@@ -97,12 +101,13 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
                               scene.geometry.normals.at(2, row, col));
       const Eigen::Vector3d t = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
       const Eigen::Vector3d b = n.cross(t);
-      const Eigen::Vector3d lw = stack.lights[light].direction_in_world;
+      const Eigen::Vector3d lw = stack.lights[light].DirectionFrom(point);
+      const double irradiance = stack.lights[light].RelativeIrradianceAt(point);
       const Eigen::Vector3d vw = (stack.views[view].centre_in_world_mm - point).normalized();
       const Vec3<double> l(lw.dot(t), lw.dot(b), lw.dot(n));
       const Vec3<double> v(vw.dot(t), vw.dot(b), vw.dot(n));
       const auto& params = scene.truth[static_cast<std::size_t>(row) * spec.width + col];
-      const Vec3<double> rgb = EvaluatePrincipled(params, l, v) * std::max(0.0, l.z());
+      const Vec3<double> rgb = EvaluatePrincipled(params, l, v) * (std::max(0.0, l.z()) * irradiance);
       bool saturated = false;
       for (int c = 0; c < 3; ++c) {
         double value = rgb(c);
@@ -139,6 +144,13 @@ inline Scene MakeScene(const SceneSpec& spec) {
     light.id += std::to_string(i);
     light.type = LightType::kDirectional;
     light.direction_in_world = LightDirection(spec.lights_deg[i].first, spec.lights_deg[i].second);
+    if (spec.point_light_distance_mm > 0.0) {
+      light.type = LightType::kPoint;
+      light.position_in_world_mm = centre + spec.point_light_distance_mm * light.direction_in_world;
+      light.has_profile = true;
+      light.profile_axis_in_world = -light.direction_in_world;
+      light.profile_exponent = 2.0;
+    }
     stack.lights.push_back(light);
   }
   scene.geometry.normals = Image(spec.width, spec.height, 3, 0.0f, spec.pitch_mm);
