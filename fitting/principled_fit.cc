@@ -582,7 +582,7 @@ bool FitOptions::Check() const {
   return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
-         pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
+         mismatch_relative_rms > 0.0 && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
          pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0;
 }
 
@@ -671,6 +671,15 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       ++result.convergence.clusters_failed;
       result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
       LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
+    }
+    if (c.rms_relative_residual > options.mismatch_relative_rms) {
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
+                    "not explain these pixels; expect biased parameters)",
+                    c.id, c.rms_relative_residual, options.mismatch_relative_rms);
+      result.convergence.messages.push_back(buffer);
+      LogWarning() << "fitting: " << buffer;
     }
   }
 

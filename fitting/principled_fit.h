@@ -62,6 +62,9 @@ struct FitOptions {
   double gradient_tolerance = 1e-12;
   // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
   int luminance_passes = 4;
+  // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
+  // the convergence messages (the Principled model does not explain its data).
+  double mismatch_relative_rms = 0.05;
   // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
   // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
   // Gauss-Newton iteration, 2 more with specular.
@@ -119,7 +122,7 @@ struct StageTimes {
 struct ConvergenceReport {
   bool all_converged = true;
   int clusters_failed = 0;              // not converged or numerically failed
-  std::vector<std::string> messages;    // one line per problem, empty when all is well
+  std::vector<std::string> messages;    // one line per problem or mismatch warning, empty when all is well
   std::int64_t pixels_fitted = 0;       // pixels with enough observations
   std::int64_t pixels_refined = 0;      // pixels whose own roughness / specular were kept
 };

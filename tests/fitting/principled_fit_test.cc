@@ -337,7 +337,9 @@ TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
   for (Observation& o : noisy.observations) {
     for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
   }
-  const FitResult result = FitPrincipled(noisy, scene.geometry, FitOptions());
+  FitOptions options;
+  options.samples_per_cluster = 48;  // noisy solves iterate long; keep the test fast
+  const FitResult result = FitPrincipled(noisy, scene.geometry, options);
   MaybePrint("NoisyCaptureMeetsTheIssueTargets", result);
   ExpectFinite(result);
   const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
@@ -360,6 +362,51 @@ TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
               << ", specular_tint " << MeanAbsError(scene, result, FitParameter::kSpecularTint) << ", sheen_tint "
               << MeanAbsError(scene, result, FitParameter::kSheenTint) << "; worst held-out relative RMSE "
               << worst_rmse << "\n";
+  }
+}
+
+// Model mismatch (the issue asks for the same figures): the render's sheen is Charlie sheen, which
+// the Principled model cannot represent (it is visible even from overhead, where Disney sheen is
+// not). The figures are printed with U3MSCAN_FIT_PRINT_JSON=1 and quoted in docs/fitting.md; the
+// test checks that the fit stays finite and that the report flags the misfit instead of hiding it.
+constexpr double kMismatchFlagRelativeRms = 0.05;
+
+TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.oblique_view = true;
+  spec.model = testing::RenderModel::kCharlieSheen;
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
+  const Scene scene = MakeScene(spec);
+  const std::set<int> held_out = {1, 6, 11, 18};
+  FitOptions options;
+  options.samples_per_cluster = 48;  // misfit solves iterate long; keep the test fast
+  const FitResult result = FitPrincipled(WithoutLights(scene.stack, held_out), scene.geometry, options);
+  MaybePrint("ModelMismatchIsReported", result);
+  ExpectFinite(result);
+  const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
+  const double specular = MeanAbsError(scene, result, FitParameter::kSpecular);
+  const double sheen = MeanAbsError(scene, result, FitParameter::kSheen);
+  double worst_rmse = 0.0;
+  for (const Observation& o : scene.stack.observations) {
+    if (!held_out.count(o.light)) continue;
+    const double rmse = RelativeRmse(RenderFitted(result, scene.stack, scene.geometry, o), o.rgb);
+    worst_rmse = std::max(worst_rmse, rmse);
+    if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+      std::cout << "mismatch held-out view " << o.view << " light " << o.light << " rmse " << rmse << "\n";
+    }
+  }
+  double rms_residual = 0.0;
+  for (const ClusterFit& c : result.clusters) rms_residual = std::max(rms_residual, c.rms_relative_residual);
+  EXPECT_GT(rms_residual, kMismatchFlagRelativeRms) << "the misfit must show in the report";
+  bool flagged = false;
+  for (const std::string& m : result.convergence.messages) flagged = flagged || m.find("mismatch") != std::string::npos;
+  EXPECT_TRUE(flagged) << "the convergence report names the model mismatch";
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "mismatch: mean |error| roughness " << roughness << ", specular " << specular << ", sheen " << sheen
+              << " (Charlie sheen value vs Disney sheen fit); worst held-out relative RMSE " << worst_rmse
+              << "; worst cluster relative RMS residual " << rms_residual << "\n";
   }
 }
 

@@ -25,6 +25,12 @@ inline constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 using MaterialFn = std::function<PrincipledParams<double>(int col, int row)>;
 
+// Reflectance model of the render. kCharlieSheen is the model-mismatch case of the issue: Disney's
+// sheen replaced by the Estevez-Kulla "Charlie" sheen (SIGGRAPH 2017) with the Neubelt-Pettineo
+// cloth visibility, the second model of the synthetic scanner (datasets_synthetic/renderer.h),
+// written here again from the papers so that the fitting tests stay independent of that library.
+enum class RenderModel { kPrincipled, kCharlieSheen };
+
 struct SceneSpec {
   int width = 16;
   int height = 16;
@@ -43,6 +49,7 @@ struct SceneSpec {
   // > 0: point lights at this distance (mm) from the grid centre in the directions above, with a
   // cos^2 emission profile aimed at the centre; rgb then scales with 1/d^2 (core LightModel).
   double point_light_distance_mm = 0.0;
+  RenderModel model = RenderModel::kPrincipled;
   MaterialFn material;
 };
 
@@ -84,6 +91,26 @@ inline Eigen::Vector3d LightDirection(double elevation_deg, double azimuth_deg) 
   return {std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)};
 }
 
+// Charlie sheen roughness floor: the distribution is undefined at 0 (Estevez and Kulla clamp too).
+inline constexpr double kMinCharlieRoughness = 0.07;
+
+// f of the chosen model (1/sr), L and V unit in the local frame.
+inline Vec3<double> EvaluateModel(RenderModel model, const PrincipledParams<double>& params, const Vec3<double>& l,
+                                  const Vec3<double>& v) {
+  if (model == RenderModel::kPrincipled) return EvaluatePrincipled(params, l, v);
+  if (!(l.z() > 0.0) || !(v.z() > 0.0)) return Vec3<double>::Zero();
+  PrincipledParams<double> base = params;
+  base.sheen = 0.0;
+  const Vec3<double> h = (l + v).normalized();
+  const double r = std::max(kMinCharlieRoughness, params.roughness);
+  // D = (2 + 1/r) sin(theta_h)^(1/r) / (2 pi); V = 1 / (4 (cos_l + cos_v - cos_l cos_v)).
+  const double sin2 = std::max(0.0, 1.0 - h.z() * h.z());
+  const double d = (2.0 + 1.0 / r) * std::pow(sin2, 0.5 / r) / (2.0 * 3.14159265358979323846);
+  const double vis = 1.0 / (4.0 * (l.z() + v.z() - l.z() * v.z()));
+  const Vec3<double> tint = brdf::Mix(Vec3<double>(1, 1, 1), brdf::TintColor(params.base_color), params.sheen_tint);
+  return EvaluatePrincipled(base, l, v) + tint * (params.sheen * d * vis * (1.0 - params.metallic));
+}
+
 // Renders one observation with the core BRDF: rgb = f * cos_l * E (E = 1 for directional lights).
 inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, int view, int light) {
   const Stack& stack = scene.stack;
@@ -107,7 +134,7 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
       const Vec3<double> l(lw.dot(t), lw.dot(b), lw.dot(n));
       const Vec3<double> v(vw.dot(t), vw.dot(b), vw.dot(n));
       const auto& params = scene.truth[static_cast<std::size_t>(row) * spec.width + col];
-      const Vec3<double> rgb = EvaluatePrincipled(params, l, v) * (std::max(0.0, l.z()) * irradiance);
+      const Vec3<double> rgb = EvaluateModel(spec.model, params, l, v) * (std::max(0.0, l.z()) * irradiance);
       bool saturated = false;
       for (int c = 0; c < 3; ++c) {
         double value = rgb(c);
