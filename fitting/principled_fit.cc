@@ -229,14 +229,16 @@ PixelCostSettings Settings(const FitOptions& options, const ParameterVector& par
   return s;
 }
 
+// Cost over at most `pixel_limit` samples; `free` decides the luminance passes (see Settings).
 double SamplesCost(const ClusterSamples& samples, std::size_t pixel_limit, const ParameterVector& params,
-                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& none = {}) {
+                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& free = {}) {
   double cost = 0.0;
   const std::size_t pixels = std::min(pixel_limit, samples.pixels());
-  for (std::size_t p = 0; p < pixels; ++p) {
+  for (std::size_t j = 0; j < pixels; ++j) {
+    const std::size_t p = j * samples.pixels() / pixels;  // evenly spread over the samples
     const auto obs = samples.pixel(p);
     residuals.resize(3 * obs.size());
-    cost += PixelResiduals(params, obs, Settings(options, params, none, samples.luminance_start[p]), residuals.data());
+    cost += PixelResiduals(params, obs, Settings(options, params, free, samples.luminance_start[p]), residuals.data());
   }
   return cost;
 }
