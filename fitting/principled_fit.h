@@ -72,7 +72,9 @@ struct FitOptions {
   bool refine_specular_per_pixel = false;
   double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
   double pixel_max_std = 0.05;       // a pixel's value is kept only if its posterior std is below this
-  double pixel_min_specular_fraction = 0.1;  // screen: some observation's specular share must exceed this
+  // Screen: a pixel is refined only if its largest reflectance ratio exceeds its median one by
+  // 1 / (1 - this), i.e. it shows a highlight of at least this share.
+  double pixel_min_specular_fraction = 0.1;
   int pixel_iterations = 1;
   // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
 
