@@ -47,6 +47,8 @@ constexpr double kMaxNormalLength = 1.5;
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
+// Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
+constexpr double kMetallicStart = 0.7;
 // Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
 // whose cost does not drop within them keeps the cluster value; this is the cheap stage).
 constexpr double kMinStepScale = 0.3;
@@ -363,92 +365,151 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     samples.luminance_start[p] = std::max(kMinStartLuminance, Luminance(c));
   }
 
+  ObservabilityContext context;
+  context.pixel_count = static_cast<int>(samples.pixels());
+  context.max_grazing_weight = max_grazing;
+  Matrix7 fisher;
+  // Fisher information (and the context's cost) at `p` with `free` deciding the colour passes.
+  auto update_fisher = [&](const ParameterVector& p, const ParameterMask& free) {
+    const auto t_obs = Clock::now();
+    double cost = 0.0;
+    int residual_count = 0;
+    fisher = FisherInformation(samples, p, options, free, &cost, &residual_count);
+    context.cost = cost;
+    context.residual_count = residual_count;
+    *observability_s += Seconds(t_obs);
+  };
+  // The leave-out rule over `free`, then: keep a left-out parameter whose default the data exclude.
+  auto decide = [&](const ParameterVector& p, const ParameterMask& free) {
+    update_fisher(p, free);
+    const auto t_obs = Clock::now();
+    ObservabilityDecision d = DecideObservability(fisher, free, context, options.observability);
+    const double cost_at_fit = SamplesCost(samples, samples.pixels(), p, options, residuals, free);
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!free[i] || d.measured[i]) continue;
+      ParameterVector trial_default = p;
+      trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
+      const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, free);
+      const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
+      if (chi2 > options.observability.default_rejection_chi2) {
+        d.measured[i] = true;
+        char buffer[200];
+        std::snprintf(buffer, sizeof buffer,
+                      "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
+                      "(chi^2 +%.3g): kept at the fitted value",
+                      d.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
+        d.reason[i] = buffer;
+      }
+    }
+    *observability_s += Seconds(t_obs);
+    return d;
+  };
+  // Left-out parameters to their defaults and a refit without them; returns the solve's outcome.
+  auto refit_without_left_out = [&](ParameterVector& p, const ParameterMask& measured) {
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!measured[i]) p[i] = FitParameterDefault(static_cast<FitParameter>(i));
+    }
+    const ParameterVector before = p;
+    SolveOutcome o = SolveCluster(samples, measured, options, p);
+    if (!o.usable) {
+      LogError() << "fitting: cluster " << id << " refit failed (" << o.message << ")";
+      p = before;
+      o.converged = false;
+      o.message = "refit failed: " + o.message;
+      return o;
+    }
+    return o;
+  };
+
   // First solve with every candidate free.
   SolveOutcome outcome = SolveCluster(samples, candidates, options, params);
   if (!outcome.usable) {
     LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
     params = start;
   }
+  const SolveOutcome first = outcome;
+  int iterations = first.iterations;
 
   // Observability at the solution, then a refit with the left-out parameters at their defaults.
-  const auto t_obs = Clock::now();
-  double cost = 0.0;
-  int residual_count = 0;
-  Matrix7 fisher = FisherInformation(samples, params, options, candidates, &cost, &residual_count);
-  ObservabilityContext context;
-  context.pixel_count = static_cast<int>(samples.pixels());
-  context.residual_count = residual_count;
-  context.cost = cost;
-  context.max_grazing_weight = max_grazing;
-  ObservabilityDecision decision = DecideObservability(fisher, candidates, context, options.observability);
-  // Keep a left-out parameter whose default the data exclude.
-  const double cost_at_fit = SamplesCost(samples, samples.pixels(), params, options, residuals, candidates);
-  for (int i = 0; i < kFitParameterCount; ++i) {
-    if (!candidates[i] || decision.measured[i]) continue;
-    ParameterVector trial_default = params;
-    trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
-    const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, candidates);
-    const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
-    if (chi2 > options.observability.default_rejection_chi2) {
-      decision.measured[i] = true;
-      char buffer[200];
-      std::snprintf(buffer, sizeof buffer,
-                    "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
-                    "(chi^2 +%.3g): kept at the fitted value",
-                    decision.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
-      decision.reason[i] = buffer;
-    }
-  }
-  *observability_s += Seconds(t_obs);
-  const SolveOutcome first = outcome;
+  ObservabilityDecision decision = decide(params, candidates);
   if (decision.measured != candidates) {
-    for (int i = 0; i < kFitParameterCount; ++i) {
-      if (!decision.measured[i]) params[i] = FitParameterDefault(static_cast<FitParameter>(i));
-    }
-    ParameterVector before = params;
-    outcome = SolveCluster(samples, decision.measured, options, params);
-    if (!outcome.usable) {
-      LogError() << "fitting: cluster " << id << " refit failed (" << outcome.message << ")";
-      params = before;
-    }
-    const auto t_obs2 = Clock::now();
-    fisher = FisherInformation(samples, params, options, decision.measured, &cost, &residual_count);
-    context.cost = cost;
-    context.residual_count = residual_count;
-    *observability_s += Seconds(t_obs2);
+    outcome = refit_without_left_out(params, decision.measured);
+    iterations += outcome.iterations;
+    update_fisher(params, decision.measured);
   }
-  const ParameterVector std_dev = PosteriorStdDev(fisher, decision.measured, context, options.observability);
 
+  // Relative RMS residual (unweighted) and mean base colour over the samples.
+  auto summarise = [&](const ParameterVector& p, const ParameterMask& free, Eigen::Vector3d* mean_color) {
+    Eigen::Vector3d color_sum = Eigen::Vector3d::Zero();
+    double err2 = 0.0, data2 = 0.0;
+    for (std::size_t i = 0; i < samples.pixels(); ++i) {
+      const auto obs = samples.pixel(i);
+      const Eigen::Vector3d c = SolveBaseColor(p, obs, Settings(options, p, free, samples.luminance_start[i]));
+      color_sum += c;
+      for (const LocalObservation& o : obs) {
+        err2 += (RenderLocal(p, c, o.light_local, o.view_local, o.irradiance) - o.rgb).squaredNorm();
+        data2 += o.rgb.squaredNorm();
+      }
+    }
+    if (mean_color != nullptr) *mean_color = color_sum / static_cast<double>(samples.pixels());
+    return data2 > 0.0 ? std::sqrt(err2 / data2) : 0.0;
+  };
+  fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+
+  // Metallic only when the data demand it: a poorly explained cluster is refitted with metallic
+  // free; that fit replaces the dielectric one if it explains the data (relative RMS residual
+  // within mismatch_relative_rms), chi^2 drops by more than default_rejection_chi2 and metallic is
+  // then measured. Observability is decided again for the new model.
+  const int metal = kMetallic;
+  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > options.mismatch_relative_rms) {
+    ParameterMask free = decision.measured;
+    free[metal] = true;
+    ParameterVector trial = params;
+    trial[metal] = kMetallicStart;
+    SolveOutcome metal_outcome = SolveCluster(samples, free, options, trial);
+    if (metal_outcome.usable) {
+      const double cost_now = SamplesCost(samples, samples.pixels(), params, options, residuals, decision.measured);
+      const double cost_metal = SamplesCost(samples, samples.pixels(), trial, options, residuals, free);
+      const ObservabilityContext dielectric_context = context;
+      const Matrix7 dielectric_fisher = fisher;
+      ObservabilityDecision metal_decision = decide(trial, free);
+      const double gain = EffectiveChi2Increase(cost_metal, cost_now, context, options.observability);
+      // Demanded = the metallic model explains the data (not merely a better misfit).
+      const bool explains = summarise(trial, free, nullptr) <= options.mismatch_relative_rms;
+      if (explains && gain > options.observability.default_rejection_chi2 && metal_decision.measured[metal]) {
+        params = trial;
+        iterations += metal_outcome.iterations;
+        if (metal_decision.measured != free) {
+          metal_outcome = refit_without_left_out(params, metal_decision.measured);
+          iterations += metal_outcome.iterations;
+          update_fisher(params, metal_decision.measured);
+        }
+        char buffer[160];
+        std::snprintf(buffer, sizeof buffer, "demanded by the data: chi^2 -%.3g with metallic free", gain);
+        metal_decision.reason[metal] = buffer;
+        decision = metal_decision;
+        outcome = metal_outcome;
+        fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+      } else {
+        context = dielectric_context;  // keep the dielectric fit's figures
+        fisher = dielectric_fisher;
+      }
+    }
+  }
+
+  const ParameterVector std_dev = PosteriorStdDev(fisher, decision.measured, context, options.observability);
   fit.initial_cost = first.initial_cost;
   fit.final_cost = outcome.final_cost;
-  fit.iterations = first.iterations + (decision.measured != candidates ? outcome.iterations : 0);
-  fit.converged = first.converged && outcome.converged;
+  fit.iterations = iterations;
+  fit.converged = outcome.converged;  // the final solve is what counts
   fit.message = outcome.message;
-  if (!first.converged && outcome.converged) fit.converged = true;  // the final solve is what counts
   for (int i = 0; i < kFitParameterCount; ++i) {
     ParameterEstimate& e = fit.parameters[i];
     e.value = params[i];
     e.measured = decision.measured[i];
     e.std_dev = e.measured ? std_dev[i] : std::numeric_limits<double>::infinity();
-    e.reason = decision.reason[i];  // for a measured parameter only the "weakly constrained" note
+    e.reason = decision.reason[i];  // for a measured parameter only a "weakly constrained" / "demanded" note
   }
-
-  // Mean base colour and relative RMS residual (unweighted) over the samples.
-  Eigen::Vector3d color_sum = Eigen::Vector3d::Zero();
-  double err2 = 0.0, data2 = 0.0;
-  for (std::size_t p = 0; p < samples.pixels(); ++p) {
-    const auto obs = samples.pixel(p);
-    const Eigen::Vector3d c =
-        SolveBaseColor(params, obs, Settings(options, params, decision.measured, samples.luminance_start[p]));
-    color_sum += c;
-    for (const LocalObservation& o : obs) {
-      const Eigen::Vector3d pred = RenderLocal(params, c, o.light_local, o.view_local, o.irradiance);
-      err2 += (pred - o.rgb).squaredNorm();
-      data2 += o.rgb.squaredNorm();
-    }
-  }
-  fit.mean_base_color = color_sum / static_cast<double>(samples.pixels());
-  fit.rms_relative_residual = data2 > 0.0 ? std::sqrt(err2 / data2) : 0.0;
   return fit;
 }
 

@@ -55,6 +55,10 @@ struct FitOptions {
   bool fit_sheen_tint = true;
   bool fit_anisotropic = true;
   bool fit_metallic = false;
+  // With fit_metallic off, a cluster the model explains poorly (mismatch_relative_rms) is refitted
+  // with metallic free, and metallic is kept only if the metallic model then explains the data
+  // (see docs/fitting.md).
+  bool metallic_if_demanded = true;
   // Ceres.
   int max_iterations = 100;
   double function_tolerance = 1e-8;

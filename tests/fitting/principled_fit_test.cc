@@ -224,6 +224,27 @@ TEST_F(PrincipledFitTest, OverheadRigRecoversAnisotropy) {
   }
 }
 
+TEST_F(PrincipledFitTest, MetallicOnlyWhenTheDataDemandIt) {
+  // A metallic thread (gold-coloured, no diffuse): the dielectric fit cannot explain it, the
+  // metallic refit must. The fabric scenes above keep metallic at 0 ("not measured").
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.9, 0.65, 0.3) * (1.0 + 0.04 * std::sin(0.8 * col + row));
+    p.metallic = 1.0;
+    p.roughness = 0.35;
+    return p;
+  };
+  const Scene scene = MakeScene(spec);
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("MetallicOnlyWhenTheDataDemandIt", result);
+  ExpectFinite(result);
+  EXPECT_TRUE(result.report(FitParameter::kMetallic).measured) << result.report(FitParameter::kMetallic).reason;
+  ExpectRecovered(scene, result, FitParameter::kMetallic, kExactParameterTolerance);
+  ExpectRecovered(scene, result, FitParameter::kRoughness, kExactParameterTolerance);
+}
+
 TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
   SceneSpec spec;
   spec.lights_deg = OverheadLights();
@@ -404,9 +425,12 @@ TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
   const std::set<int> held_out = {1, 6, 11, 18};
   FitOptions options;
   options.samples_per_cluster = 48;  // misfit solves iterate long; keep the test fast
+  options.clustering.cluster_count = 4;
+  options.max_iterations = 40;
   const FitResult result = FitPrincipled(WithoutLights(scene.stack, held_out), scene.geometry, options);
   MaybePrint("ModelMismatchIsReported", result);
   ExpectFinite(result);
+  EXPECT_FALSE(result.report(FitParameter::kMetallic).measured) << "a misfit does not make a fabric metallic";
   const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
   const double specular = MeanAbsError(scene, result, FitParameter::kSpecular);
   const double sheen = MeanAbsError(scene, result, FitParameter::kSheen);
