@@ -164,8 +164,8 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
   record.Ran("grid", detail.str());
 }
 
-void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationResult& done,
-                     CalibrationResult& result, Recorder& record) {
+void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
+                     const CalibrationResult& done, CalibrationResult& result, Recorder& record) {
   for (const LightSpec& spec : manifest.lights) {
     LightCalibration calibration;
     calibration.model = LightModelFromSpec(spec);
@@ -183,7 +183,16 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       continue;
     }
     // One placement may use the manifest's centre_mm; several placements are found in their frames.
-    const bool use_known_centre = sphere_indices.size() == 1 && manifest.targets.sphere->center_mm.has_value();
+    // A pose found from one board view maps the sample plane to within a tenth of a pixel but can
+    // be off along the tilt/translation trade-off for points above it (the sphere): the sphere's
+    // centre found in the frame under that same pose then absorbs part of the error, so it is
+    // preferred to the manifest's centre for such cameras (which stays the fall-back).
+    const bool known_centre_available = sphere_indices.size() == 1 && manifest.targets.sphere->center_mm.has_value();
+    std::optional<double> centre_height;
+    if (options.sphere_on_known_height) {
+      centre_height = manifest.targets.sphere->center_mm ? manifest.targets.sphere->center_mm->z()
+                                                         : manifest.targets.sphere->radius_mm;
+    }
     std::vector<SphereObservation> observations;
     for (std::size_t index : sphere_indices) {
       const FrameSpec& frame_spec = manifest.frames[index];
@@ -191,8 +200,22 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       if (!camera) continue;
       try {
         DecodedFrame frame = LoadCorrected(manifest, load, result.dark_ambient, index);
-        observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
-                                             use_known_centre ? manifest.targets.sphere->center_mm : std::nullopt));
+        const bool pose_from_manifest = camera->pose_source == "manifest";
+        if (known_centre_available && pose_from_manifest) {
+          observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
+                                               manifest.targets.sphere->center_mm));
+        } else {
+          try {
+            observations.push_back(
+                ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file, std::nullopt,
+                              centre_height));
+          } catch (const InputError& error) {
+            if (!known_centre_available) throw;
+            LogInfo() << "calibrate: " << error.what() << "; using the manifest's sphere centre";
+            observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
+                                                 manifest.targets.sphere->center_mm));
+          }
+        }
         calibration.sphere_frames.push_back(frame_spec.file);
       } catch (const InputError& error) {
         record.Warn(std::string(error.what()) + " (frame skipped)");
@@ -206,7 +229,7 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
     }
     const LightFit fit = calibration.model.type == LightType::kDirectional
                              ? FitDirectionalLight(observations, calibration.model)
-                             : FitPointLight(observations, calibration.model);
+                             : FitPointLight(observations, calibration.model, options.light_fit);
     calibration.model = fit.model;
     calibration.source = "mirror sphere";
     calibration.placements = fit.placements;
@@ -514,7 +537,7 @@ CalibrationResult Calibrate(const Manifest& manifest, const FrameLoader& load, c
   CalibrateCameras(manifest, load, options, manifest_file, result, record);
   ReportProgress(progress, "calibrate", 0.4);
   ChooseResultGrid(manifest, options, manifest_file, result, record);
-  CalibrateLights(manifest, load, result, result, record);
+  CalibrateLights(manifest, load, options, result, result, record);
   ReportProgress(progress, "calibrate", 0.6);
   CalibrateFlats(manifest, load, options, result, record);
   ReportProgress(progress, "calibrate", 0.8);
