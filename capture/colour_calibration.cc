@@ -16,14 +16,18 @@ constexpr int kColumns = 6;
 constexpr int kRows = 4;
 constexpr double kSampledFraction = 0.5;  // the central half of a patch's pitch, clear of its edges
 
-// Mean of the frame over the quadrilateral `corners` (px), 3 channels.
+// Mean of the frame over the quadrilateral `corners` (px), 3 channels; the mask covers only the
+// quadrilateral's bounding box, so a patch costs its own size, not the frame's.
 Rgb MeanOverQuad(const Image& frame, const std::array<cv::Point2f, 4>& corners) {
-  cv::Mat mask = cv::Mat::zeros(frame.height(), frame.width(), CV_8U);
   std::vector<cv::Point> polygon;
   for (const auto& c : corners) polygon.emplace_back(static_cast<int>(std::lround(c.x)), static_cast<int>(std::lround(c.y)));
-  cv::fillConvexPoly(mask, polygon, cv::Scalar(255));
+  const cv::Rect box = cv::boundingRect(polygon) & cv::Rect(0, 0, frame.width(), frame.height());
   Rgb mean{};
-  for (int c = 0; c < 3; ++c) mean[c] = cv::mean(internal::PlaneView(frame, c), mask)[0];
+  if (box.empty()) return mean;
+  for (auto& p : polygon) p -= box.tl();
+  cv::Mat mask = cv::Mat::zeros(box.size(), CV_8U);
+  cv::fillConvexPoly(mask, polygon, cv::Scalar(255));
+  for (int c = 0; c < 3; ++c) mean[c] = cv::mean(internal::PlaneView(frame, c)(box), mask)[0];
   return mean;
 }
 
