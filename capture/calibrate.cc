@@ -379,11 +379,13 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
         measured.push_back(rho);
       }
       const ColourFit fit = FitColourCorrection(measured, {reference.begin(), reference.end()});
-      result.colour = {true, spec.file, locator, fit};
+      const bool improves = fit.delta_e_after_mean < fit.delta_e_before_mean;
+      result.colour = {true, improves, spec.file, locator, fit};
       std::ostringstream detail;
       detail << "3x3 correction from " << spec.file << " (chart by " << locator << "): CIEDE2000 mean "
              << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean << " after (max "
-             << fit.delta_e_after_max << ")";
+             << fit.delta_e_after_max << ")"
+             << (improves ? "" : "; not applied: the camera's colours are already closer to the chart");
       record.Ran("colour", detail.str());
       return;
     } catch (const InputError& error) {
@@ -500,6 +502,7 @@ nlohmann::json CalibrationResult::ToJson() const {
       for (int k = 0; k < 3; ++k) matrix.push_back(colour.fit.matrix(r, k));
     }
     out["colour"] = {{"frame", colour.frame},
+                     {"applied", colour.applied},
                      {"locator", colour.locator},
                      {"matrix", matrix},
                      {"ciede2000_before_mean", colour.fit.delta_e_before_mean},
@@ -563,7 +566,7 @@ Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const Calibr
   stack.grid = calibration.grid;
   std::map<std::string, int> view_of_camera, light_of_id;
   std::map<std::string, RectificationMap> maps;
-  const bool colour = options.apply_colour_correction && calibration.colour.fitted;
+  const bool colour = options.apply_colour_correction && calibration.colour.applied;
   const Eigen::Matrix3f colour_matrix = calibration.colour.fit.matrix.cast<float>();
   for (std::size_t n = 0; n < sample_indices.size(); ++n) {
     const std::size_t index = sample_indices[n];

@@ -82,6 +82,9 @@ struct FlatCalibration {
 
 struct ColourCalibration {
   bool fitted = false;
+  // Applied by BuildStack only when it brings the chart closer to its reference (mean CIEDE2000
+  // after < before): a camera already in sRGB gains nothing but noise from a 3x3 fit.
+  bool applied = false;
   std::string frame;
   std::string locator;  // "mcc" or "known layout"
   ColourFit fit;
