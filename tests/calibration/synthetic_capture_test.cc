@@ -106,7 +106,7 @@ void CheckCameras(const CalibrationResult& result, const synthetic::Rig& rig) {
 }
 
 TEST(SyntheticCapture, DistantRigLightsAndStack) {
-  const auto written = WriteCapture("distant", synthetic::FrameFormat::kExr, 320, 240, 0.25, 6, false);
+  const auto written = WriteCapture("distant", synthetic::FrameFormat::kDng, 320, 240, 0.25, 6, false);  // the RAW path
   const Capture capture = Capture::Open(written->root / synthetic::kCaptureSubdir);
   CalibrationOptions options;
   const CalibrationResult result = Calibrate(capture, options);
