@@ -349,8 +349,20 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
       }
       if (!patches) {
         if (options.use_mcc) LogInfo() << "calibrate: mcc found no chart in " << spec.file << ", using the known layout";
-        patches = MeasureChartAtLayout(frame.rgb, camera->model, options.chart_layout, spec.file);
+        ChartLayout layout = options.chart_layout;
         locator = "known layout";
+        if (!(layout.patch_pitch_mm > 0.0)) {
+          layout.patch_pitch_mm = FindChartPitchMm(frame.rgb, camera->model, layout.centre_mm);
+          if (!(layout.patch_pitch_mm > 0.0)) {
+            throw InputError(spec.file, "", "a 24-patch colour chart (mcc found none, and none fits in the view centred on (" +
+                                                std::to_string(layout.centre_mm.x()) + ", " +
+                                                std::to_string(layout.centre_mm.y()) + ") mm)");
+          }
+          std::ostringstream how;
+          how << "known layout, pitch " << layout.patch_pitch_mm << " mm searched";
+          locator = how.str();
+        }
+        patches = MeasureChartAtLayout(frame.rgb, camera->model, layout, spec.file);
       }
       // Patch readings -> reflectance: divide by exposure, intensity, cosine and irradiance (the
       // measured flat where there is one).
@@ -401,7 +413,7 @@ nlohmann::json Vector(const Eigen::Vector3d& v) { return nlohmann::json::array({
 
 bool CalibrationOptions::Check() const {
   return (side == "front" || side == "back") && (!dpi || *dpi > 0.0) && min_board_frames_for_intrinsics >= 3 &&
-         min_board_corners >= 4 && chart_layout.patch_pitch_mm > 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0;
+         min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0;
 }
 
 LightModel LightModelFromSpec(const LightSpec& spec) {
