@@ -48,13 +48,22 @@ struct IntegrationOptions {
   // sigma = max(1.4826 * median |edge residual|, min_residual_slope * pitch_mm), so that
   // noise-free smooth surfaces (residuals ~ 0) keep unit weights.
   RobustLoss loss = RobustLoss::kCauchy;
-  int robust_iterations = 12;
+  int robust_iterations = 30;
+  // kRobust on maps of at least 2 * kCoarsestSide pixels a side: start from the robust solution
+  // of the 2x2-averaged map (recursively), upsampled; without it a cut grows a few pixels per round.
+  bool multiscale = true;
+  static constexpr int kCoarsestSide = 64;
   double min_residual_slope = 0.02;
+  // The rounds stop when at most this fraction of the edges changed weight by more than 0.01.
+  double settled_edge_fraction = 1e-4;
   // No edge weight goes below this (keeps the system connected and conditioned).
   double min_edge_weight = 1e-4;
 
   // Conjugate gradients: stop at this relative residual |b - Az| / |b| or this many iterations.
+  // The reweighting rounds of kRobust stop at the looser robust_round_cg_tolerance (their heights
+  // only set the next weights); the final system is solved to cg_tolerance.
   double cg_tolerance = 1e-7;
+  double robust_round_cg_tolerance = 1e-4;
   int max_cg_iterations = 400;
 
   bool Check() const;
