@@ -66,6 +66,7 @@ struct PixelObservation {
   double grey = 0.0;    // mean of rgb
   double inv_e = 0.0;   // 1 / E: residuals * inv_e are in shading units (rho / pi * cos)
   double weight = 0.0;  // current IRLS weight (0 = not used)
+  double previous_weight = 0.0;  // of the last accepted IRLS round
   bool candidate = false;
 };
 
@@ -236,6 +237,7 @@ class Solver {
         // Attached shadow: the linear model predicts a negative value the camera cannot see.
         if (o.candidate && o.s.dot(bg) > 0.0) w = RobustWeight(options_.loss, residual(o), sigma);
         change = std::max(change, std::fabs(w - o.weight));
+        o.previous_weight = o.weight;
         o.weight = w;
       }
       PixelSystem next;
@@ -243,7 +245,10 @@ class Solver {
       // Weights left fewer than 3 independent lights: keep the last good system.
       const Eigen::LLT<Matrix3d> llt(next.a);
       const double scale = next.a.trace();
-      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) break;
+      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) {
+        for (auto& o : obs) o.weight = o.previous_weight;  // weights and system stay consistent
+        break;
+      }
       sys.a = next.a;
       sys.r = next.r;
       sys.weight_sum = next.weight_sum;
