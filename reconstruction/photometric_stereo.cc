@@ -50,6 +50,10 @@ namespace {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
+// Albedo values are clamped to this (a physical reflectance is <= 1; anything near this bound
+// comes from broken input such as a near-zero measured irradiance).
+constexpr double kMaxAlbedo = 1e6;
+
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
   kDark = 1u << 0,
@@ -470,7 +474,9 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   auto store = [&](std::size_t i, const PixelEstimate& est, const Vector3d& albedo) {
     for (int c = 0; c < 3; ++c) {
       res.normal.data()[c * n + i] = static_cast<float>(est.normal(c));
-      res.albedo.data()[c * n + i] = static_cast<float>(albedo(c));
+      // Garbage input (e.g. a near-zero irradiance) must not overflow the float map.
+      const double a = std::isfinite(albedo(c)) ? std::clamp(albedo(c), 0.0, kMaxAlbedo) : 0.0;
+      res.albedo.data()[c * n + i] = static_cast<float>(a);
     }
     res.confidence.data()[i] = static_cast<float>(est.confidence);
     res.condition_number.data()[i] = static_cast<float>(est.condition);
