@@ -14,11 +14,12 @@
 //    leaving the valid region are cut and the system is solved by conjugate gradients
 //    preconditioned with the same DCT solve.
 //  - kRobust: IRLS on the edge residuals with a Cauchy or Tukey weight, each weighted system solved
-//    matrix-free by DCT-preconditioned conjugate gradients. Edges that disagree with the surface
-//    (discontinuities: fabric edges, tears, holes, wrong normals) lose their weight, so a jump stays
-//    where it is instead of being spread over the map.
+//    matrix-free by DCT-preconditioned conjugate gradients, coarse to fine. Edges that disagree with
+//    the surface (discontinuities: fabric edges, tears, holes, wrong normals) lose their weight, so
+//    a jump stays where it is instead of being spread over the map.
 // Memory: no matrices. kDct without mask: 7 float and 2 double planes of the map size; a mask adds
-// 4 double planes (CG), kRobust 2 more float planes (robust weights). 36 MP DCT: ~1.6 GB plus input and output.
+// 4 double planes (CG), kRobust 2 more float planes (robust weights) and its coarser levels (1/3
+// more). 36 MP DCT: ~1.6 GB plus input and output.
 
 #include <string>
 
