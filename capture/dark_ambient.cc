@@ -43,7 +43,7 @@ DarkAmbient BuildDarkAmbient(const Manifest& manifest, const FrameLoader& load) 
   for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
     const FrameSpec& spec = manifest.frames[i];
     if (spec.role != FrameRole::kDark) continue;
-    LinearFrame frame = load(i);
+    DecodedFrame frame = load(i);
     CheckSize(manifest, i, frame.rgb);
     auto [it, inserted] = result.dark_by_camera.try_emplace(spec.camera, frame.rgb.width(), frame.rgb.height(), 3);
     Accumulate(it->second, frame.rgb, 1.0);
@@ -57,7 +57,7 @@ DarkAmbient BuildDarkAmbient(const Manifest& manifest, const FrameLoader& load) 
   for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
     const FrameSpec& spec = manifest.frames[i];
     if (spec.role != FrameRole::kAmbient) continue;
-    LinearFrame frame = load(i);
+    DecodedFrame frame = load(i);
     CheckSize(manifest, i, frame.rgb);
     result.Apply(spec, frame.rgb);  // its own dark (role ambient: no ambient of course)
     const auto key = std::make_pair(spec.camera, spec.side);

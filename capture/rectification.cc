@@ -166,7 +166,7 @@ Image RectifyImage(const Image& image, const RectificationMap& map) {
   return out;
 }
 
-RectifiedFrame Rectify(const LinearFrame& frame, const RectificationMap& map) {
+RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map) {
   RectifiedFrame result;
   result.rgb = RectifyImage(frame.rgb, map);
   result.flags.assign(map.out_of_view.size(), 0);

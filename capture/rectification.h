@@ -47,7 +47,7 @@ struct RectifiedFrame {
 
 // Resamples `frame` (camera pixels) onto the map's grid (bilinear; when the grid is coarser than
 // the camera by more than 1.5x, a Gaussian pre-filter against aliasing).
-RectifiedFrame Rectify(const LinearFrame& frame, const RectificationMap& map);
+RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map);
 // The same for any image (all channels), without flags.
 Image RectifyImage(const Image& image, const RectificationMap& map);
 

@@ -96,7 +96,7 @@ TEST(Rectification, OutOfViewAndSaturatedPixelsAreFlagged) {
   output.region_mm = std::array<double, 4>{-40.0, -20.0, 40.0, 20.0};  // wider than the view
   const MetricGrid grid = ChooseGrid({camera}, output);
   const RectificationMap map = BuildRectificationMap(camera, grid);
-  LinearFrame frame{Image(64, 48, 3, 0.5f), std::vector<std::uint8_t>(64 * 48, 0)};
+  DecodedFrame frame{Image(64, 48, 3, 0.5f), std::vector<std::uint8_t>(64 * 48, 0)};
   frame.saturated[20 * 64 + 32] = 1;
   const RectifiedFrame rectified = Rectify(frame, map);
   EXPECT_TRUE(rectified.flags[10 * grid.width + 0] & kOutOfView);    // x = -39.5 mm: outside
