@@ -86,8 +86,12 @@ void WriteDng(const fs::path& path, const std::vector<std::uint16_t>& mosaic, in
   }
   const Eigen::Matrix3d colour_matrix = options.colour_matrix.value_or(LinearSrgbToXyz().inverse());
 
+  // Appended piece by piece: GCC 12 warns (-Wrestrict, a false positive) on "." + s + ".partial".
+  std::string temp_name = ".";
+  temp_name += path.filename().string();
+  temp_name += ".partial";
   fs::path temp = path;
-  temp.replace_filename("." + path.filename().string() + ".partial");
+  temp.replace_filename(temp_name);
   auto fail = [&](const std::string& what) {
     std::error_code ignored;
     fs::remove(temp, ignored);

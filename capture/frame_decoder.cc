@@ -123,9 +123,10 @@ class CountingRawStream : public LibRaw_file_datastream {
   long missing_bytes_ = 0;
 };
 
+// Members in this order so the stream outlives the LibRaw object that reads from it.
 struct RawSession {
-  std::unique_ptr<LibRaw> raw = std::make_unique<LibRaw>(0);
   std::unique_ptr<CountingRawStream> stream;
+  std::unique_ptr<LibRaw> raw = std::make_unique<LibRaw>(0);
 };
 
 [[noreturn]] void RawFail(const fs::path& path, const std::string& what, int code) {
@@ -144,7 +145,7 @@ void OpenRaw(const fs::path& path, const FrameDecodeOptions& options, RawSession
   p.gamm[1] = 1.0;
   p.no_auto_bright = 1;
   p.user_qual = 3;             // AHD demosaic
-  p.highlight = 1;             // unclipped: white balance must not clip channels, see DecodeRawFrame
+  p.highlight = 1;             // unclipped: white balance must not clip channels, see DecodeRaw
   p.adjust_maximum_thr = 0.0f; // keep the file's white level, never the data maximum
   p.user_flip = 0;             // sensor orientation: pixels must match the camera intrinsics
   p.use_fuji_rotate = 0;       // no 45-degree Fuji rotation, no pixel-aspect stretch
@@ -162,7 +163,9 @@ void OpenRaw(const fs::path& path, const FrameDecodeOptions& options, RawSession
   if (options.response) {
     // libraw 0.20 takes user_sat as the white level above the (subtracted) black level: with
     // user_sat set it scales by 65535 / user_sat, not 65535 / (user_sat - black).
+    // The manifest's black level replaces the file's, per-channel offsets included.
     p.user_black = static_cast<int>(std::lround(options.response->black_level));
+    for (int c = 0; c < 4; ++c) p.user_cblack[c] = 0;
     p.user_sat = static_cast<int>(std::lround(options.response->white_level - options.response->black_level));
   }
   const int rc = s->raw->open_datastream(s->stream.get());
@@ -178,7 +181,7 @@ CompactFrame DecodeRaw(const fs::path& path, const FrameDecodeOptions& options) 
   LibRaw& raw = *s.raw;
   s.stream->Watch();
   int rc = raw.unpack();
-  if (rc != LIBRAW_SUCCESS) RawFail(path, "complete RAW image data", rc);
+  if (rc != LIBRAW_SUCCESS) RawFail(path, "complete RAW image data (truncated or corrupt?)", rc);
   if (s.stream->missing_bytes() > kTruncationSlackBytes) {
     throw InputError(path.string(), "",
                      "complete RAW image data; the file ends " + std::to_string(s.stream->missing_bytes()) +
@@ -236,6 +239,14 @@ CompactFrame DecodeRaw(const fs::path& path, const FrameDecodeOptions& options) 
   }
   out.rgb16.resize(static_cast<std::size_t>(width) * height * 3);
   std::copy_n(reinterpret_cast<const std::uint16_t*>(img->data), out.rgb16.size(), out.rgb16.data());
+  // libraw clips its output at 65535; a colour matrix with gains above 1 can get there from
+  // unsaturated photosites near the white level. A clipped value is not data either.
+  ParallelFor(static_cast<std::size_t>(height), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b * width; i < e * width; ++i) {
+      const std::uint16_t* px = out.rgb16.data() + i * 3;
+      if (px[0] == 65535 || px[1] == 65535 || px[2] == 65535) out.saturated[i] = 1;
+    }
+  });
 
   // libraw scaled by pre_mul / max(pre_mul) so that no channel clips (highlight = 1); undo the
   // division by the largest so the reference channel (smallest multiplier) has 1.0 = white level.
@@ -336,27 +347,36 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
   const float srgb_white = 254.5f / 255.0f;
 
   const int nch = spec.nchannels;
-  const int tiled = spec.tile_width > 0;
+  // Scanline files are read in bands of kRowsPerRead full rows; tiled files one row of tiles at
+  // a time, only the tile columns the region touches (read_tiles needs tile-aligned bounds).
+  const bool tiled = spec.tile_width > 0 && spec.tile_height > 0;
+  const int band_rows = tiled ? spec.tile_height : kRowsPerRead;
+  const int buf_x0 = tiled ? x / spec.tile_width * spec.tile_width : 0;
+  const int buf_x1 =
+      tiled ? std::min(spec.width, (x + w + spec.tile_width - 1) / spec.tile_width * spec.tile_width) : spec.width;
+  const int buf_w = buf_x1 - buf_x0;
+  const int read_y0 = tiled ? y / spec.tile_height * spec.tile_height : y;
+  const int read_y1 = y + h;
   std::vector<float> buffer;
-  // Tiled files are read whole (OIIO reads scanline ranges of scanline files only).
-  const int band_rows = tiled ? spec.height : kRowsPerRead;
-  const int read_y0 = tiled ? 0 : y;
-  const int read_y1 = tiled ? spec.height : y + h;
   for (int band = read_y0; band < read_y1; band += band_rows) {
-    const int band_end = std::min(read_y1, band + band_rows);
-    buffer.resize(static_cast<std::size_t>(band_end - band) * spec.width * nch);
+    const int band_end = tiled ? std::min(spec.height, band + band_rows) : std::min(read_y1, band + band_rows);
+    buffer.resize(static_cast<std::size_t>(band_end - band) * buf_w * nch);
     bool ok;
     if (tiled) {
-      ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
+      ok = in->read_tiles(0, 0, spec.x + buf_x0, spec.x + buf_x1, spec.y + band, spec.y + band_end, spec.z,
+                          spec.z + std::max(1, spec.depth), 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     } else {
       ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     }
-    if (!ok) throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
+    // OIIO's TIFF reader reports a short strip as an error message but still returns true.
+    if (!ok || in->has_error()) {
+      throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
+    }
     const int row_begin = std::max(band, y), row_end = std::min(band_end, y + h);
     ParallelFor(static_cast<std::size_t>(std::max(0, row_end - row_begin)), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         const int row = row_begin + static_cast<int>(i);
-        const float* src = buffer.data() + (static_cast<std::size_t>(row - band) * spec.width + x) * nch;
+        const float* src = buffer.data() + (static_cast<std::size_t>(row - band) * buf_w + (x - buf_x0)) * nch;
         const int out_row = row - y;
         std::uint8_t* sat = out.saturated.data() + static_cast<std::size_t>(out_row) * w;
         for (int c = 0; c < w; ++c) {

@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <random>
+#include <stdexcept>
 #include <system_error>
 #include <vector>
 
@@ -42,8 +44,6 @@ std::string Lower(std::string s) {
   return s;
 }
 
-bool IsPng(const fs::path& path) { return Lower(path.extension().string()) == ".png"; }
-
 // OIIO reports every untagged PNG as "sRGB" (the PNG default), so the tag is read from the chunks
 // themselves: an sRGB chunk, or an embedded ICC profile named like sRGB (iCCP), before the image data.
 bool PngHasSrgbTag(const fs::path& path) {
@@ -77,13 +77,13 @@ double DpiFrom(float resolution, const std::string& unit) {
   return 0.0;
 }
 
-ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path) {
+ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path, bool png) {
   ImageReadInfo info;
   info.width = spec.width;
   info.height = spec.height;
   info.channels = spec.nchannels;
   info.format = FromTypeDesc(spec.format);
-  if (IsPng(path)) {
+  if (png) {
     info.srgb_tagged = PngHasSrgbTag(path);
   } else {
     // TIFF and JPEG: the EXIF colour space tag, or an ICC profile that names sRGB.
@@ -102,9 +102,71 @@ ImageReadInfo InfoFromSpec(const oiio::ImageSpec& spec, const fs::path& path) {
   return info;
 }
 
+// TIFF's "YYYY:MM:DD HH:MM:SS" in UTC. OIIO would otherwise stamp the local time of writing,
+// which makes two writes of the same map differ.
+std::string TiffDateTime(std::time_t utc) {
+  if (utc == 0) utc = std::time(nullptr);
+  std::tm t{};
+  gmtime_r(&utc, &t);
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y:%m:%d %H:%M:%S", &t);
+  return text;
+}
+
 std::string RandomSuffix() {
   static thread_local std::mt19937_64 rng{std::random_device{}()};
   return std::to_string(rng() % 1000000000ull);
+}
+
+// sRGB-decoded value of every 8- and 16-bit code, built once. The reader and the writer's means
+// both go through DecodeSample, so one table keeps them identical and saves a pow per sample.
+struct SrgbTables {
+  std::vector<float> eight, sixteen;
+  SrgbTables() : eight(256), sixteen(65536) {
+    for (std::size_t c = 0; c < eight.size(); ++c) eight[c] = static_cast<float>(SrgbToLinear(c / 255.0));
+    for (std::size_t c = 0; c < sixteen.size(); ++c) sixteen[c] = static_cast<float>(SrgbToLinear(c / 65535.0));
+  }
+};
+const SrgbTables& SrgbDecodeTables() {
+  static const SrgbTables tables;
+  return tables;
+}
+
+// 8-bit sRGB encoding without a pow per sample. Code k + 1 begins at the linear value whose
+// encoding is (k + 0.5) / 255 (round to nearest in encoded space). [0, 1] is cut into kBuckets equal
+// parts, each holding at most one code boundary (the narrowest gap between boundaries, at the
+// bottom of the curve, is 1 / (255 * 12.92) = 3.0e-4 > 1 / 4096), so the code is the bucket's first
+// code plus one comparison.
+class Srgb8Encoder {
+ public:
+  Srgb8Encoder() : bounds_(255), first_code_(kBuckets + 1) {
+    for (std::size_t k = 0; k < bounds_.size(); ++k) bounds_[k] = SrgbToLinear((k + 0.5) / 255.0);
+    for (std::size_t b = 0; b <= kBuckets; ++b) {
+      const double start = static_cast<double>(b) / kBuckets;
+      first_code_[b] = static_cast<std::uint8_t>(std::upper_bound(bounds_.begin(), bounds_.end(), start) - bounds_.begin());
+    }
+    for (std::size_t b = 0; b < kBuckets; ++b) {
+      if (first_code_[b + 1] - first_code_[b] > 1) throw std::logic_error("Srgb8Encoder: bucket holds two code boundaries");
+    }
+  }
+  // v in [0, 1].
+  std::uint32_t Encode(float v) const {
+    const double x = v;
+    const std::size_t bucket = std::min(static_cast<std::size_t>(x * kBuckets), kBuckets);
+    std::uint32_t code = first_code_[bucket];
+    if (code < 255 && x >= bounds_[code]) ++code;
+    return code;
+  }
+
+ private:
+  static constexpr std::size_t kBuckets = 4096;
+  std::vector<double> bounds_;
+  std::vector<std::uint8_t> first_code_;
+};
+
+const Srgb8Encoder& Srgb8() {
+  static const Srgb8Encoder encoder;
+  return encoder;
 }
 
 // Interleaved samples of `image` in the file's sample type, encoded and quantised (integer formats).
@@ -134,15 +196,22 @@ std::vector<T> Interleave(const Image& image, const ImageWriteOptions& options) 
 }  // namespace
 
 std::uint32_t EncodeSample(float linear, PixelEncoding encoding, SampleFormat format) {
-  float v = std::isnan(linear) ? 0.0f : std::clamp(linear, 0.0f, 1.0f);
-  if (encoding == PixelEncoding::kSrgb) v = LinearToSrgb(v);
+  const float v = std::isnan(linear) ? 0.0f : std::clamp(linear, 0.0f, 1.0f);
   const std::uint32_t max_code = MaxCode(format);
-  return static_cast<std::uint32_t>(std::lround(static_cast<double>(v) * max_code));
+  if (encoding == PixelEncoding::kLinear) {
+    return static_cast<std::uint32_t>(std::lround(static_cast<double>(v) * max_code));
+  }
+  if (format == SampleFormat::kUInt8) return Srgb8().Encode(v);
+  return static_cast<std::uint32_t>(std::lround(LinearToSrgb(static_cast<double>(v)) * max_code));
 }
 
 float DecodeSample(std::uint32_t code, PixelEncoding encoding, SampleFormat format) {
-  const float v = static_cast<float>(static_cast<double>(code) / MaxCode(format));
-  return encoding == PixelEncoding::kSrgb ? SrgbToLinear(v) : v;
+  const std::uint32_t max_code = MaxCode(format);
+  code = std::min(code, max_code);
+  if (encoding == PixelEncoding::kSrgb) {
+    return format == SampleFormat::kUInt8 ? SrgbDecodeTables().eight[code] : SrgbDecodeTables().sixteen[code];
+  }
+  return static_cast<float>(static_cast<double>(code) / max_code);
 }
 
 void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOptions& options) {
@@ -166,6 +235,7 @@ void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOp
     spec.attribute("ResolutionUnit", "in");
   }
   if (ext == ".exr" || ext == ".tif" || ext == ".tiff") spec.attribute("compression", "zip");
+  if (ext == ".tif" || ext == ".tiff") spec.attribute("DateTime", TiffDateTime(options.modified_utc));
   // Maps hold straight (unassociated) alpha, as PNG and U3M expect; without this OIIO would divide
   // the colour by alpha on the way out.
   spec.attribute("oiio:UnassociatedAlpha", 1);
@@ -217,14 +287,14 @@ std::unique_ptr<oiio::ImageInput> OpenInput(const fs::path& path) {
 ImageReadInfo ReadImageInfo(const fs::path& path) {
   auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
-  return InfoFromSpec(in->spec(), path);
+  return InfoFromSpec(in->spec(), path, std::string(in->format_name()) == "png");
 }
 
 Image ReadImageFile(const fs::path& path, PixelEncoding encoding, ImageReadInfo* info_out) {
   auto in = OpenInput(path);
   if (!in) throw InputError(path.string(), "", "a readable image (PNG, TIFF, EXR, JPEG): " + oiio::geterror());
   const oiio::ImageSpec& spec = in->spec();
-  const ImageReadInfo info = InfoFromSpec(spec, path);
+  const ImageReadInfo info = InfoFromSpec(spec, path, std::string(in->format_name()) == "png");
   if (info_out) *info_out = info;
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
     throw InputError(path.string(), "", "an image with a positive size");

@@ -5,6 +5,7 @@
 // (colour, data, normal) and the U3M means on top of this file.
 
 #include <cstdint>
+#include <ctime>
 #include <filesystem>
 #include <string>
 
@@ -29,6 +30,9 @@ struct ImageWriteOptions {
   // per metre (300 dpi reads back as 299.9994); TIFF stores it exactly; EXR ignores it.
   double dpi = 0.0;
   double dpi_y = 0.0;  // 0 = same as dpi
+  // TIFF DateTime tag, written in UTC (0 = now). Fix it for reproducible files; PNG and EXR carry
+  // no time.
+  std::time_t modified_utc = 0;
 };
 
 // Writes `image` (values clamped to 0..1 for integer formats) to `path`; the container comes from

@@ -226,9 +226,12 @@ class Reader {
     Object(v, p, "a colour object {r, g, b}");
     CheckKeys(v, p, {"r", "g", "b"});
     Rgb3 c{NumberOr(v, "r", p, fallback.r), NumberOr(v, "g", p, fallback.g), NumberOr(v, "b", p, fallback.b)};
-    CheckUnit(c.r, p + "/r", "a colour component");
-    CheckUnit(c.g, p + "/g", "a colour component");
-    CheckUnit(c.b, p + "/b", "a colour component");
+    // Out of 0..1 no version can hold a colour: clamp (an error issue), so a rewrite stays valid.
+    for (auto [value, key] : {std::pair{&c.r, "/r"}, std::pair{&c.g, "/g"}, std::pair{&c.b, "/b"}}) {
+      if (*value >= 0.0 && *value <= 1.0) continue;
+      Error(p + key, "a colour component must be in 0..1, got " + Fmt(*value) + "; clamped");
+      *value = std::clamp(*value, 0.0, 1.0);
+    }
     return c;
   }
 
@@ -354,12 +357,29 @@ class Reader {
     CheckKeys(v, p, {"type", "name"});
     NamedType named;
     named.type = StringOr(v, "type", p, "unknown");
-    if (!Contains(types, named.type)) Error(p + "/type", "\"" + named.type + "\" is not in the schema's list");
     if (const JsonValue* name = Required(v, "name", p); name && !name->is_null())
       named.name = String(*name, p + "/name");
-    if (named.type == "other" && !named.name) Error(p + "/name", "type \"other\" needs a name string");
-    if (named.type != "other" && named.name) Error(p + "/name", "must be null unless type is \"other\"");
+    NormaliseNamedType(named.type, named.name, types, p);
     return named;
+  }
+
+  // The schema's if/then/else: a name exactly when the type is "other". Keeps the information in
+  // a form every writer can hold: an unknown type becomes "other" named after it.
+  void NormaliseNamedType(std::string& type, std::optional<std::string>& name,
+                          const std::vector<std::string_view>& types, const std::string& p) {
+    if (!Contains(types, type)) {
+      Error(p + "/type", "\"" + type + "\" is not in the schema's list; read as \"other\" with that name");
+      name = name ? type + " (" + *name + ")" : type;
+      type = "other";
+      return;
+    }
+    if (type == "other" && !name) {
+      Error(p + "/name", "type \"other\" needs a name string; read as \"other\"");
+      name = "other";
+    } else if (type != "other" && name) {
+      Error(p + "/name", "must be null unless type is \"other\"; \"" + *name + "\" dropped");
+      name.reset();
+    }
   }
 
   std::optional<double> OptionalNumber(const JsonValue& object, std::string_view key, const std::string& p) {
@@ -402,14 +422,15 @@ class Reader {
           CheckKeys(item, pp, {"ratio", "type", "name"});
           CompositionPart part;
           part.ratio = NumberOr(item, "ratio", pp, 0.0);
-          CheckUnit(part.ratio, pp + "/ratio", "a ratio");
+          if (part.ratio < 0.0 || part.ratio > 1.0) {
+            Error(pp + "/ratio", "a ratio must be in 0..1, got " + Fmt(part.ratio) + "; clamped");
+            part.ratio = std::clamp(part.ratio, 0.0, 1.0);
+          }
           sum += part.ratio;
           part.type = StringOr(item, "type", pp, "unknown");
-          if (!Contains(kFibreTypes, part.type)) Error(pp + "/type", "\"" + part.type + "\" is not in the schema's list");
           if (const JsonValue* name = Required(item, "name", pp); name && !name->is_null())
             part.name = String(*name, pp + "/name");
-          if (part.type == "other" && !part.name) Error(pp + "/name", "type \"other\" needs a name string");
-          if (part.type != "other" && part.name) Error(pp + "/name", "must be null unless type is \"other\"");
+          NormaliseNamedType(part.type, part.name, kFibreTypes, pp);
           parts.push_back(std::move(part));
         }
         if (!list->items().empty() && std::abs(sum - 1.0) > 1e-3)

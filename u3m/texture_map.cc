@@ -79,10 +79,12 @@ float QuantisedValue(float value, MapKind kind, int channel, SampleFormat format
   return DecodeSample(EncodeSample(value, encoding, format), encoding, format);
 }
 
-MapGeometry WriteTextureMap(const Image& map, MapKind kind, const fs::path& path, SampleFormat format) {
+MapGeometry WriteTextureMap(const Image& map, MapKind kind, const fs::path& path, SampleFormat format,
+                            std::time_t modified_utc) {
   CheckChannels(map, kind, path.string());
   ImageWriteOptions options;
   options.format = format;
+  options.modified_utc = modified_utc;
   options.encoding = kind == MapKind::kColour ? PixelEncoding::kSrgb : PixelEncoding::kLinear;
   const bool metric = map.pitch_mm() > 0.0 && std::isfinite(map.pitch_mm());
   if (metric) options.dpi = kMmPerInch / map.pitch_mm();

@@ -11,6 +11,7 @@
 // of the texture a reader loads.
 
 #include <array>
+#include <ctime>
 #include <filesystem>
 #include <vector>
 
@@ -40,8 +41,10 @@ MapGeometry GeometryOf(const Image& image);
 // or .exr (kFloat32). Normal maps need 3 channels, colour maps 3 or 4 (alpha stays linear), data
 // maps any count. The pitch goes into the file's resolution tags. Atomic (temp file + rename);
 // throws InputError naming the file on a bad combination or I/O failure. Returns the geometry
-// (zero mm/dpi when the map has no pitch).
-MapGeometry WriteTextureMap(const Image& map, MapKind kind, const std::filesystem::path& path, SampleFormat format);
+// (zero mm/dpi when the map has no pitch). `modified_utc` goes into TIFF's DateTime (0 = now):
+// pass the package's time for reproducible files.
+MapGeometry WriteTextureMap(const Image& map, MapKind kind, const std::filesystem::path& path, SampleFormat format,
+                            std::time_t modified_utc = 0);
 
 struct TextureFileInfo {
   ImageReadInfo file;     // size, sample format, sRGB tag, dpi as stored

@@ -292,6 +292,17 @@ std::vector<std::uint8_t> Deflate(std::span<const std::uint8_t> data) {
   return out;
 }
 
+// PNG, TIFF (zip) and EXR textures are compressed already. A trial on the first kTrialBytes
+// decides, from the data alone (so output stays reproducible), whether deflating the whole entry
+// can pay: it must save at least 1 % there.
+bool WorthDeflating(std::span<const std::uint8_t> data) {
+  constexpr std::size_t kTrialBytes = std::size_t{256} << 10;
+  constexpr double kMinSaving = 0.01;
+  if (data.size() <= kTrialBytes) return true;
+  const std::size_t trial = Deflate(data.first(kTrialBytes)).size();
+  return static_cast<double>(trial) < (1.0 - kMinSaving) * kTrialBytes;
+}
+
 // --- Reading ----------------------------------------------------------------------------------
 
 struct CentralEntry {
@@ -892,7 +903,7 @@ std::vector<std::uint8_t> SerializeArchive(const std::vector<ArchiveEntry>& entr
     const std::uint32_t crc = Crc32(entry.data);
     std::uint16_t method = kMethodStore;
     std::vector<std::uint8_t> deflated;
-    if (options.compression == ArchiveCompression::kDeflate && !entry.data.empty()) {
+    if (options.compression == ArchiveCompression::kDeflate && !entry.data.empty() && WorthDeflating(entry.data)) {
       deflated = Deflate(entry.data);
       const double ratio = static_cast<double>(entry.data.size()) / std::max<std::size_t>(deflated.size(), 1);
       if (deflated.size() < entry.data.size() && ratio <= limits.max_compression_ratio) method = kMethodDeflate;

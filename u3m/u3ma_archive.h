@@ -36,8 +36,9 @@ struct ArchiveLimits {
 
 enum class ArchiveCompression {
   kStore,
-  kDeflate,  // per entry: stored instead when deflate would not shrink it or would exceed the
-             // default ArchiveLimits::max_compression_ratio (so our own reader always accepts it)
+  kDeflate,  // per entry: stored instead when deflate would not shrink it (judged on the first
+             // 256 KiB for larger entries) or would exceed the default
+             // ArchiveLimits::max_compression_ratio (so our own reader always accepts it)
 };
 
 struct ArchiveWriteOptions {

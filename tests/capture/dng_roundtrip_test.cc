@@ -175,6 +175,27 @@ TEST(DngRoundTrip, ColourMatrixIsAppliedAsLibrawDoes) {
   EXPECT_NEAR(DecodeFrame(path).rgb.at(0, 16, 16), camera[0], kFlatTolerance);
 }
 
+TEST(DngRoundTrip, OutputClippedByTheColourMatrixIsFlagged) {
+  // Camera values below white whose sRGB red exceeds the white level: libraw's 16-bit output
+  // clips it, so the pixel is no longer data although no photosite saturated.
+  TempDir dir;
+  Eigen::Matrix3d mix;
+  mix << 0.80, 0.15, 0.05,  //
+      0.10, 0.80, 0.10,     //
+      0.05, 0.15, 0.80;
+  auto opt = Levels();
+  opt.colour_matrix = mix * LinearSrgbToXyz().inverse();
+  const Eigen::Vector3d camera(0.95, 0.3, 0.3);
+  ASSERT_GT((mix.inverse() * camera)[0], 1.05);  // the premise: red beyond white after the matrix
+  const auto path = dir.path() / "clip.dng";
+  WriteDng(path, MosaicFromLinearRgb(Flat(32, 32, {0.95f, 0.3f, 0.3f}), opt.pattern, kBlack, kWhite), 32, 32, opt);
+  const DecodedFrame f = DecodeFrame(path);
+  EXPECT_TRUE(f.IsSaturated(16, 16));
+  // The same values without the matrix stay data.
+  WriteDng(path, MosaicFromLinearRgb(Flat(32, 32, {0.95f, 0.3f, 0.3f}), opt.pattern, kBlack, kWhite), 32, 32, Levels());
+  EXPECT_FALSE(DecodeFrame(path).IsSaturated(16, 16));
+}
+
 TEST(DngRoundTrip, RejectsBadArguments) {
   TempDir dir;
   std::vector<std::uint16_t> mosaic(32 * 32, 0);

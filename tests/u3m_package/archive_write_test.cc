@@ -157,6 +157,21 @@ TEST(ArchiveWrite, HighRatioDataIsStoredSoOurReaderAcceptsIt) {
   EXPECT_EQ(ParseArchive(bytes, "zeros.u3ma").at(0).data.size(), entries[0].data.size());
 }
 
+TEST(ArchiveWrite, LargeEntriesAreDeflatedOnlyWhenATrialPays) {
+  std::mt19937 rng(3);
+  Bytes noise(std::size_t{1} << 20);  // like a PNG: compressed already
+  for (auto& b : noise) b = static_cast<std::uint8_t>(rng());
+  Bytes text;
+  while (text.size() < noise.size()) text.push_back(static_cast<std::uint8_t>("{\"r\": 0.5, \"g\": 0.25}\n"[rng() % 22]));
+  const Bytes bytes = SerializeArchive({{"noise.png", noise}, {"text.u3m", text}}, "large.u3ma", FixedOptions());
+  EXPECT_EQ(Get16(bytes, 8), 0) << "incompressible: stored";
+  const std::size_t second = 30 + 9 + noise.size();
+  EXPECT_EQ(Get16(bytes, second + 8), 8) << "compressible: deflated";
+  const auto read = ParseArchive(bytes, "large.u3ma");
+  EXPECT_EQ(read.at(0).data, noise);
+  EXPECT_EQ(read.at(1).data, text);
+}
+
 TEST(ArchiveWrite, BadNamesAreRefusedAndNothingIsWritten) {
   TempDir dir;
   const fs::path path = dir.path() / "bad.u3ma";

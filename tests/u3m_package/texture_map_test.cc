@@ -118,7 +118,9 @@ TEST(TextureMap, ColourMapsAreSrgbEncodedAndTagged) {
     TextureFileInfo info;
     const Image back = ReadTextureMap(path, MapKind::kColour, &info);
     EXPECT_TRUE(info.file.srgb_tagged);
-    if (std::string(fc.extension) == ".png") EXPECT_EQ(PngChunks(path).count("sRGB"), 1u);
+    if (std::string(fc.extension) == ".png") {
+      EXPECT_EQ(PngChunks(path).count("sRGB"), 1u);
+    }
     // The file holds encoded values: read raw, they follow the sRGB curve.
     const Image raw = ReadImageFile(path, PixelEncoding::kLinear);
     const double max_code = fc.format == SampleFormat::kUInt8 ? 255.0 : 65535.0;
@@ -262,15 +264,45 @@ TEST(TextureMap, QuantisedMeanDiffersFromThePlainMeanWhereItMatters) {
   EXPECT_NEAR(colour[1], 0.25, kFloatTolerance);
 }
 
+// The 8-bit sRGB encoder uses a bucket table instead of a pow; it must still round to the nearest
+// code in encoded space, and DecodeSample must invert it.
+TEST(TextureMap, EncodeSampleRoundsToTheNearestEncodedCode) {
+  constexpr int kSteps = 1 << 20;
+  constexpr double kTieWidth = 1e-6;  // in codes: float input cannot resolve ties closer than this
+  int mismatches = 0;
+  for (int i = 0; i <= kSteps; ++i) {
+    const float v = static_cast<float>(i) / kSteps;
+    for (SampleFormat format : {SampleFormat::kUInt8, SampleFormat::kUInt16}) {
+      const double max_code = format == SampleFormat::kUInt8 ? 255.0 : 65535.0;
+      const double exact = LinearToSrgb(static_cast<double>(v)) * max_code;
+      const auto code = EncodeSample(v, PixelEncoding::kSrgb, format);
+      if (code != std::lround(exact) && std::abs(exact - std::floor(exact) - 0.5) > kTieWidth) ++mismatches;
+      EXPECT_EQ(EncodeSample(v, PixelEncoding::kLinear, format), std::lround(v * max_code));
+      if (i % 4096 == 0) {
+        EXPECT_NEAR(DecodeSample(code, PixelEncoding::kSrgb, format), SrgbToLinear(code / max_code), kFloatTolerance);
+      }
+    }
+  }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_EQ(EncodeSample(-1.0f, PixelEncoding::kSrgb, SampleFormat::kUInt8), 0u);
+  EXPECT_EQ(EncodeSample(2.0f, PixelEncoding::kSrgb, SampleFormat::kUInt8), 255u);
+  EXPECT_EQ(EncodeSample(std::nanf(""), PixelEncoding::kSrgb, SampleFormat::kUInt16), 0u);
+}
+
 TEST(TextureMap, WritesAreReproducible) {
   TempDir dir;
   const Image map = RandomMap(3, 0.0f, 1.0f, 7);
-  for (const char* ext : {".png", ".tif"}) {
-    WriteTextureMap(map, MapKind::kColour, dir.path() / (std::string("a") + ext), SampleFormat::kUInt8);
-    WriteTextureMap(map, MapKind::kColour, dir.path() / (std::string("b") + ext), SampleFormat::kUInt8);
-    EXPECT_EQ(FileBytes(dir.path() / (std::string("a") + ext)), FileBytes(dir.path() / (std::string("b") + ext)))
-        << ext << ": same map, same bytes (so .u3ma archives are reproducible)";
+  constexpr std::time_t kFixedTimeUtc = 1709646330;  // 2024-03-05 13:45:30 UTC
+  for (const char* ext : {".png", ".tif", ".exr"}) {
+    const SampleFormat format = std::string(ext) == ".exr" ? SampleFormat::kFloat32 : SampleFormat::kUInt8;
+    const fs::path a = dir.path() / (std::string("a") + ext), b = dir.path() / (std::string("b") + ext);
+    WriteTextureMap(map, MapKind::kColour, a, format, kFixedTimeUtc);
+    WriteTextureMap(map, MapKind::kColour, b, format, kFixedTimeUtc + 0);
+    EXPECT_EQ(FileBytes(a), FileBytes(b)) << ext << ": same map and time, same bytes (reproducible .u3ma)";
   }
+  auto in = OIIO::ImageInput::open((dir.path() / "a.tif").string());
+  ASSERT_TRUE(in);
+  EXPECT_EQ(in->spec().get_string_attribute("DateTime"), "2024:03:05 13:45:30") << "TIFF time in UTC";
 }
 
 TEST(TextureMap, BadRequestsAndBadFilesAreInputErrorsThatWriteNothing) {
