@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iterator>
 #include <set>
+#include <unistd.h>
 #include <thread>
 #include <chrono>
 #include <nlohmann/json.hpp>
@@ -29,8 +30,9 @@ constexpr std::uint64_t kSeed = 11;
 class CaptureWriterTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() / ("u3mscan_synth_writer_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-                                         "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    // The pid keeps concurrent runs (ctest -j, other checkouts) out of each other's folders.
+    root_ = fs::temp_directory_path() / ("u3mscan_synth_writer_" + std::to_string(::getpid()) + "_" +
+                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(root_);
     fs::create_directories(root_);
     RigOptions options;

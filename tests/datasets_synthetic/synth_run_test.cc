@@ -1,6 +1,9 @@
 #include "datasets_synthetic/synth_run.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <string>
 
 #include "capture/manifest.h"
 #include "core/error.h"
@@ -34,7 +37,7 @@ TEST(SynthRunTest, BadOptionsNameTheOption) {
 
 // A real scene preset end to end at the tiny size: the capture reads back and covers the scene.
 TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
-  const fs::path dir = fs::temp_directory_path() / "u3mscan_synth_run_test";
+  const fs::path dir = fs::temp_directory_path() / ("u3mscan_synth_run_test_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   SynthOptions options;
   options.scene = "twill";
