@@ -9,6 +9,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/parallel.h"
@@ -166,6 +167,22 @@ TEST_P(EveryScene, TwiceTheDpiSamplesTheSamePhysicalPattern) {
       for (int k = 0; k < 3; ++k) {
         ASSERT_NEAR(fine.base_color.at(k, 2 * r, 2 * c), coarse.base_color.at(k, r, c), kSameSampleTolerance);
       }
+    }
+  }
+}
+
+TEST_P(EveryScene, TinyAndNonSquareGridsWork) {
+  // Border normals come from the model beyond the grid, so even a single pixel has one.
+  for (const auto& [w, h] : {std::pair{1, 1}, std::pair{3, 2}, std::pair{17, 5}}) {
+    SceneOptions o = Options();
+    o.width = w;
+    o.height = h;
+    const SceneTruth t = MakeScene(GetParam(), o);
+    ASSERT_EQ(t.normal.width(), w);
+    ASSERT_EQ(t.normal.height(), h);
+    for (float v : t.normal.data()) ASSERT_TRUE(std::isfinite(v));
+    for (int r = 0; r < h; ++r) {
+      for (int c = 0; c < w; ++c) ASSERT_GT(t.normal.at(2, r, c), 0.0f);
     }
   }
 }
