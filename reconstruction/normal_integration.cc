@@ -8,6 +8,7 @@
 #include <unsupported/Eigen/FFT>
 #include <vector>
 
+#include "core/logging.h"
 #include "core/parallel.h"
 
 namespace u3mscan::reconstruction {
@@ -23,7 +24,8 @@ Integrator ParseIntegrator(const std::string& name) {
 bool IntegrationOptions::Check() const {
   return pitch_mm >= 0.0 && std::isfinite(pitch_mm) && min_normal_z > 0.0 && min_normal_z < 1.0 &&
          std::isfinite(mean_height_mm) && robust_iterations >= 0 && min_residual_slope > 0.0 &&
-         min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && max_cg_iterations > 0;
+         min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && robust_round_cg_tolerance > 0.0 &&
+         settled_edge_fraction >= 0.0 && max_cg_iterations > 0;
 }
 
 namespace {
@@ -320,6 +322,65 @@ double MedianAbs(std::vector<float>& values) {
   return *mid;
 }
 
+// 2x2 block means: normals (weighted by the mask, renormalised) and mask; the pitch doubles.
+void Downsample(const Image& normal, const Image& mask, double pitch_mm, Image* coarse_normal, Image* coarse_mask) {
+  const int w = normal.width(), h = normal.height();
+  const int cw = (w + 1) / 2, ch = (h + 1) / 2;
+  const std::size_t n = normal.pixel_count(), cn = static_cast<std::size_t>(cw) * ch;
+  *coarse_normal = Image(cw, ch, 3, 0.0f, 2.0 * pitch_mm);
+  *coarse_mask = Image(cw, ch, 1, 0.0f, 2.0 * pitch_mm);
+  ParallelFor(ch, [&](std::size_t r0, std::size_t r1) {
+    for (std::size_t cr = r0; cr < r1; ++cr)
+      for (int cc = 0; cc < cw; ++cc) {
+        double sum[3] = {0, 0, 0}, wsum = 0.0;
+        int count = 0;
+        for (int dr = 0; dr < 2; ++dr)
+          for (int dc = 0; dc < 2; ++dc) {
+            const int r = 2 * static_cast<int>(cr) + dr, c = 2 * cc + dc;
+            if (r >= h || c >= w) continue;
+            ++count;
+            const std::size_t i = static_cast<std::size_t>(r) * w + c;
+            double wt = mask.empty() ? 1.0 : mask.data()[i];
+            const double v[3] = {normal.data()[i], normal.data()[n + i], normal.data()[2 * n + i]};
+            if (!(wt > 0.0) || !std::isfinite(v[0] + v[1] + v[2])) continue;
+            wt = std::min(wt, 1.0);
+            for (int k = 0; k < 3; ++k) sum[k] += wt * v[k];
+            wsum += wt;
+          }
+        const std::size_t j = cr * cw + cc;
+        const double len = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
+        if (wsum > 0.0 && len > 0.0) {
+          for (int k = 0; k < 3; ++k) coarse_normal->data()[k * cn + j] = static_cast<float>(sum[k] / len);
+          coarse_mask->data()[j] = static_cast<float>(wsum / count);
+        } else {
+          coarse_normal->data()[2 * cn + j] = 1.0f;
+        }
+      }
+  });
+}
+
+// Bilinear upsampling of coarse heights onto the w x h grid (fine pixel c sits at coarse c/2 - 1/4).
+void Upsample(const Image& coarse, int w, int h, std::vector<double>& z) {
+  const int cw = coarse.width(), ch = coarse.height();
+  auto at = [&](int r, int c) {
+    return static_cast<double>(coarse.data()[static_cast<std::size_t>(std::clamp(r, 0, ch - 1)) * cw + std::clamp(c, 0, cw - 1)]);
+  };
+  ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
+    for (std::size_t r = r0; r < r1; ++r) {
+      const double y = 0.5 * static_cast<double>(r) - 0.25;
+      const int y0 = static_cast<int>(std::floor(y));
+      const double fy = y - y0;
+      for (int c = 0; c < w; ++c) {
+        const double x = 0.5 * c - 0.25;
+        const int x0 = static_cast<int>(std::floor(x));
+        const double fx = x - x0;
+        z[r * w + c] = (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
+                       fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+      }
+    }
+  });
+}
+
 }  // namespace
 
 namespace internal {
@@ -409,12 +470,28 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
   IntegrationResult result;
   const PoissonDctSolver dct(w, h);
   std::vector<double> z(n), b(n);
-  // Start: the exact unweighted solve (the whole answer for kDct without a mask).
-  BuildRightHandSide(e, /*unit_weights=*/true, b);
-  z = b;
-  dct.Solve(z);
-  ReportProgress(progress, "integration", 0.1);
-  if (!all_unit) {
+  const bool coarse_start = options.method == Integrator::kRobust && options.multiscale &&
+                            std::min(w, h) >= 2 * IntegrationOptions::kCoarsestSide;
+  if (coarse_start) {
+    // Coarse to fine: the robust solve of the half-size map puts the discontinuities in place, so
+    // the rounds here only sharpen them (a cut found by reweighting alone grows a few pixels per
+    // round).
+    Image coarse_normal, coarse_mask;
+    Downsample(normal, mask, pitch_mm, &coarse_normal, &coarse_mask);
+    IntegrationOptions coarse_options = options;
+    coarse_options.pitch_mm = 2.0 * pitch_mm;
+    const IntegrationResult coarse = IntegrateNormals(coarse_normal, coarse_mask, coarse_options);
+    result.cg_iterations += coarse.cg_iterations;
+    Upsample(coarse.height_mm, w, h, z);
+    ReportProgress(progress, "integration", 0.25);
+  } else {
+    // Start: the exact unweighted solve (the whole answer for kDct without a mask).
+    BuildRightHandSide(e, /*unit_weights=*/true, b);
+    z = b;
+    dct.Solve(z);
+    ReportProgress(progress, "integration", 0.1);
+  }
+  if (!all_unit && !coarse_start) {
     BuildRightHandSide(e, false, b);
     RemoveMean(b);
     result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
@@ -432,7 +509,9 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
     const std::size_t stride = std::max<std::size_t>(1, 2 * n / kMaxSamples);
     std::vector<float> sample;
     sample.reserve(2 * n / stride + 2);
-    std::vector<double> row_change(h);
+    // Per row: edges whose weight moved by more than kWeightStep this round.
+    constexpr float kWeightStep = 0.01f;
+    std::vector<std::size_t> row_changed(h);
     for (int round = 0; round < options.robust_iterations; ++round) {
       sample.clear();
       for (std::size_t i = 0; i < n; i += stride) {
@@ -444,34 +523,41 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
       ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
         for (std::size_t rr = r0; rr < r1; ++rr) {
           const int r = static_cast<int>(rr);
-          double change = 0.0;
+          std::size_t changed = 0;
           for (int c = 0; c < w; ++c) {
             const std::size_t i = static_cast<std::size_t>(r) * w + c;
             if (c + 1 < w) {
               const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
-              change = std::max(change, static_cast<double>(std::fabs(rw - robust_x[i])));
+              changed += std::fabs(rw - robust_x[i]) > kWeightStep;
               robust_x[i] = rw;
               e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
             }
             if (r + 1 < h) {
               const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
-              change = std::max(change, static_cast<double>(std::fabs(rw - robust_y[i])));
+              changed += std::fabs(rw - robust_y[i]) > kWeightStep;
               robust_y[i] = rw;
               e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
             }
           }
-          row_change[rr] = change;
+          row_changed[rr] = changed;
         }
       });
-      const double max_change = *std::max_element(row_change.begin(), row_change.end());
+      std::size_t changed = 0;
+      for (std::size_t c : row_changed) changed += c;
       ++result.robust_iterations;
-      if (round > 0 && max_change < 1e-3) break;  // weights settled: the last solve stands
+      // Weights settled (at most 1e-4 of the edges still moving): the final solve follows.
+      if (round > 0 && static_cast<double>(changed) <= options.settled_edge_fraction * 2.0 * static_cast<double>(n)) break;
       BuildRightHandSide(e, false, b);
       RemoveMean(b);
-      result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
-                                       &result.relative_residual);
-      ReportProgress(progress, "integration", 0.1 + 0.9 * (round + 1) / options.robust_iterations);
+      // Rounds only need heights good enough to reweigh; the last system is solved tightly below.
+      result.cg_iterations += SolvePcg(e, dct, b, z, std::max(options.cg_tolerance, options.robust_round_cg_tolerance),
+                                       options.max_cg_iterations, &result.relative_residual);
+      ReportProgress(progress, "integration", 0.1 + 0.85 * (round + 1) / options.robust_iterations);
     }
+    BuildRightHandSide(e, false, b);
+    RemoveMean(b);
+    result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
+                                     &result.relative_residual);
   }
 
   // Anchor: mean over the valid pixels.
@@ -499,6 +585,9 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
       }
       conf[i] = cmin * pixel_weight[i];
     }
+  LogDebug() << "integration " << IntegratorName(options.method) << " " << w << "x" << h << ": "
+             << result.robust_iterations << " robust rounds, " << result.cg_iterations
+             << " CG iterations (incl. coarser levels), relative residual " << result.relative_residual;
   ReportProgress(progress, "integration", 1.0);
   return result;
 }

@@ -50,6 +50,10 @@ namespace {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
+// Albedo values are clamped to this (a physical reflectance is <= 1; anything near this bound
+// comes from broken input such as a near-zero measured irradiance).
+constexpr double kMaxAlbedo = 1e6;
+
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
   kDark = 1u << 0,
@@ -66,6 +70,7 @@ struct PixelObservation {
   double grey = 0.0;    // mean of rgb
   double inv_e = 0.0;   // 1 / E: residuals * inv_e are in shading units (rho / pi * cos)
   double weight = 0.0;  // current IRLS weight (0 = not used)
+  double previous_weight = 0.0;  // of the last accepted IRLS round
   bool candidate = false;
 };
 
@@ -236,6 +241,7 @@ class Solver {
         // Attached shadow: the linear model predicts a negative value the camera cannot see.
         if (o.candidate && o.s.dot(bg) > 0.0) w = RobustWeight(options_.loss, residual(o), sigma);
         change = std::max(change, std::fabs(w - o.weight));
+        o.previous_weight = o.weight;
         o.weight = w;
       }
       PixelSystem next;
@@ -243,7 +249,10 @@ class Solver {
       // Weights left fewer than 3 independent lights: keep the last good system.
       const Eigen::LLT<Matrix3d> llt(next.a);
       const double scale = next.a.trace();
-      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) break;
+      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) {
+        for (auto& o : obs) o.weight = o.previous_weight;  // weights and system stay consistent
+        break;
+      }
       sys.a = next.a;
       sys.r = next.r;
       sys.weight_sum = next.weight_sum;
@@ -465,7 +474,9 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   auto store = [&](std::size_t i, const PixelEstimate& est, const Vector3d& albedo) {
     for (int c = 0; c < 3; ++c) {
       res.normal.data()[c * n + i] = static_cast<float>(est.normal(c));
-      res.albedo.data()[c * n + i] = static_cast<float>(albedo(c));
+      // Garbage input (e.g. a near-zero irradiance) must not overflow the float map.
+      const double a = std::isfinite(albedo(c)) ? std::clamp(albedo(c), 0.0, kMaxAlbedo) : 0.0;
+      res.albedo.data()[c * n + i] = static_cast<float>(a);
     }
     res.confidence.data()[i] = static_cast<float>(est.confidence);
     res.condition_number.data()[i] = static_cast<float>(est.condition);
