@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <Eigen/Geometry>
 #include <filesystem>
 #include <iostream>
 #include <unistd.h>
@@ -100,7 +101,9 @@ void CheckCameras(const CalibrationResult& result, const synthetic::Rig& rig) {
         worst = std::max(worst, (found->model.Project(p) - truth_model.Project(p)).norm());
       }
     }
-    std::cout << "measured: camera " << truth.id << " plane registration worst " << worst << " px\n";
+    std::cout << "measured: camera " << truth.id << " plane registration worst " << worst << " px; pose off by "
+              << RadToDeg(Eigen::AngleAxisd(truth.world_from_camera.transpose() * found->model.pose.rotation).angle())
+              << " deg and " << (found->model.pose.translation_mm - truth.position_mm).norm() << " mm\n";
     EXPECT_LT(worst, kMaxPlaneRegistrationPx);
   }
 }
