@@ -2,10 +2,12 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <vector>
@@ -53,6 +55,9 @@ using Eigen::Vector3d;
 // Albedo values are clamped to this (a physical reflectance is <= 1; anything near this bound
 // comes from broken input such as a near-zero measured irradiance).
 constexpr double kMaxAlbedo = 1e6;
+
+// Smallest cosine the albedo of a regularised pixel assumes for its observations (84 deg).
+constexpr double kRegularisedCosFloor = 0.1;
 
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
@@ -263,12 +268,15 @@ class Solver {
   }
 
   // Per-channel albedo for a fixed normal: rho_c = pi * sum w rgb_c m / sum w m^2, m = max(0, s.n).
-  static Vector3d AlbedoFor(const std::vector<PixelObservation>& obs, const Vector3d& n) {
+  // cos_floor > 0 bounds the cosine from below (m >= cos_floor |s|): for a normal that came from the
+  // neighbours rather than the data, a light nearly perpendicular to it would otherwise turn its
+  // observation into an unbounded albedo.
+  static Vector3d AlbedoFor(const std::vector<PixelObservation>& obs, const Vector3d& n, double cos_floor = 0.0) {
     Vector3d num = Vector3d::Zero();
     double den = 0.0;
     for (const auto& o : obs) {
       if (o.weight <= 0.0) continue;
-      const double m = std::max(0.0, o.s.dot(n));
+      const double m = std::max(cos_floor * o.s.norm(), o.s.dot(n));
       num += o.weight * m * o.rgb;
       den += o.weight * m * m;
     }
@@ -331,7 +339,7 @@ class Solver {
     if (low_albedo) est.state |= kLowAlbedo;
     if (prior != nullptr && (ill || low_albedo)) {
       // Tikhonov toward rho_prior * n_prior: the data fixes what it constrains, the neighbours the rest.
-      const Vector3d rho_prior = AlbedoFor(obs, *prior) / std::numbers::pi;
+      const Vector3d rho_prior = AlbedoFor(obs, *prior, kRegularisedCosFloor) / std::numbers::pi;
       const double strength = ill ? 1.0 : 1.0 - albedo_grey / options_.reliable_albedo;
       const double lambda = options_.regularisation * strength * std::max(sys.eigenvalues(2), 1e-300);
       b = sys.Solve(lambda, *prior * rho_prior.transpose());
@@ -345,7 +353,7 @@ class Solver {
       n = prior != nullptr ? *prior : Vector3d::UnitZ();
     }
     const double nz_factor = ClampNormal(n, est.state);
-    albedo = AlbedoFor(obs, n);
+    albedo = AlbedoFor(obs, n, (est.state & kRegularised) ? kRegularisedCosFloor : 0.0);
 
     const double count_factor = est.used < 3 ? 0.0 : (est.used == 3 ? 0.5 : 1.0);
     const double rel = RelativeResidual(obs, n, albedo) / options_.residual_tolerance;
@@ -576,12 +584,21 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   if (solver.has_point_lights() && options.refine_height) {
     IntegrationOptions integration = options.integration;
     integration.pitch_mm = stack.grid.pitch_mm;
+    double previous_change = std::numeric_limits<double>::infinity();
     for (int it = 1; it <= options.max_near_iterations; ++it) {
       ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
       // Confidence as integration weights: unreliable normals do not bend the height.
       Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
       PhotometricStereoResult next = SolveAt(solver, stack, options, height);
       const double change = MeanAngleDeg(next.normal, result.normal);
+      if (change >= previous_change) {
+        // Not converging (normals too unreliable to place the surface): keep the last round,
+        // whose change was the smallest.
+        LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
+                     << " deg after " << previous_change << " deg); kept round " << it - 1;
+        break;
+      }
+      previous_change = change;
       result = std::move(next);
       result.height_mm = std::move(height);
       result.near_iterations = it;
