@@ -44,7 +44,8 @@ bool PhotometricStereoOptions::Check() const {
          band_low_fraction + band_high_fraction < 1.0 && residual_quantile > 0.0 && residual_quantile < 1.0 && irls_iterations >= 0 && min_residual_fraction > 0.0 &&
          good_condition >= 1.0 && max_condition > good_condition && max_reported_condition >= max_condition &&
          reliable_albedo > 0.0 && min_normal_z > 0.0 && min_normal_z < 1.0 && residual_tolerance > 0.0 &&
-         regularisation > 0.0 && max_near_iterations >= 0 && near_tolerance_deg > 0.0 && integration.Check();
+         regularisation > 0.0 && regularise_below_confidence >= 0.0 && regularise_below_confidence <= 1.0 &&
+         max_near_iterations >= 0 && near_tolerance_deg > 0.0 && integration.Check();
 }
 
 namespace {
@@ -66,7 +67,10 @@ enum PixelState : std::uint8_t {
   kLowAlbedo = 1u << 2,
   kClamped = 1u << 3,
   kRegularised = 1u << 4,
+  kLowConfidence = 1u << 5,  // pass-1 confidence below regularise_below_confidence
 };
+// Pixels whose first-pass estimate is not to be trusted alone: re-solved with the neighbour prior.
+constexpr std::uint8_t kNeedsNeighbours = kDark | kIllConditioned | kLowAlbedo | kLowConfidence;
 
 // One observation at the current pixel. Lives in a per-chunk scratch array: no per-pixel allocation.
 struct PixelObservation {
@@ -323,7 +327,8 @@ class Solver {
 
   // The pixel's final normal, albedo and confidence from its weighted system. prior: the
   // neighbours' normal, used when the pixel needs regularisation (null in the first pass).
-  void Finish(Scratch& scratch, const PixelSystem& sys, const Vector3d* prior, PixelEstimate& est, Vector3d& albedo) const {
+  void Finish(Scratch& scratch, const PixelSystem& sys, const Vector3d* prior, PixelEstimate& est, Vector3d& albedo,
+              bool low_confidence = false) const {
     const auto& obs = scratch.obs;
     est.condition = sys.Condition(options_.max_reported_condition);
     est.used = 0;
@@ -337,10 +342,10 @@ class Solver {
     const double albedo_grey = std::numbers::pi * bg.norm();
     const bool low_albedo = albedo_grey < options_.reliable_albedo;
     if (low_albedo) est.state |= kLowAlbedo;
-    if (prior != nullptr && (ill || low_albedo)) {
+    if (prior != nullptr && (ill || low_albedo || low_confidence)) {
       // Tikhonov toward rho_prior * n_prior: the data fixes what it constrains, the neighbours the rest.
       const Vector3d rho_prior = AlbedoFor(obs, *prior, kRegularisedCosFloor) / std::numbers::pi;
-      const double strength = ill ? 1.0 : 1.0 - albedo_grey / options_.reliable_albedo;
+      const double strength = ill || low_confidence ? 1.0 : 1.0 - albedo_grey / options_.reliable_albedo;
       const double lambda = options_.regularisation * strength * std::max(sys.eigenvalues(2), 1e-300);
       b = sys.Solve(lambda, *prior * rho_prior.transpose());
       bg = b.rowwise().mean();
@@ -507,6 +512,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
         } else {
           solver.Weigh(scratch, sys);
           solver.Finish(scratch, sys, nullptr, est, albedo);
+          if (est.confidence < options.regularise_below_confidence) est.state |= kLowConfidence;
         }
         store(i, est, albedo);
       }
@@ -516,13 +522,13 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   std::vector<float> reliable(n);
   bool any_unreliable = false;
   for (std::size_t i = 0; i < n; ++i) {
-    const bool needs = (state[i] & (kDark | kIllConditioned | kLowAlbedo)) != 0;
+    const bool needs = (state[i] & kNeedsNeighbours) != 0;
     reliable[i] = needs ? 0.0f : res.confidence.data()[i];
     any_unreliable |= needs;
   }
   if (any_unreliable) {
     std::vector<std::uint8_t> needs(n);
-    for (std::size_t i = 0; i < n; ++i) needs[i] = (state[i] & (kDark | kIllConditioned | kLowAlbedo)) != 0;
+    for (std::size_t i = 0; i < n; ++i) needs[i] = (state[i] & kNeedsNeighbours) != 0;
     const Image prior = NeighbourPrior(res.normal, reliable, needs, w, h);
     ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
       Scratch scratch(solver.observation_count());
@@ -530,7 +536,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
       for (std::size_t r = r0; r < r1; ++r)
         for (int c = 0; c < w; ++c) {
           const std::size_t i = r * w + c;
-          if (reliable[i] > 0.0f || (state[i] & (kDark | kIllConditioned | kLowAlbedo)) == 0) continue;
+          if ((state[i] & kNeedsNeighbours) == 0) continue;
           const Vector3d p(prior.data()[i], prior.data()[n + i], prior.data()[2 * n + i]);
           PixelEstimate est;
           Vector3d albedo = Vector3d::Zero();
@@ -541,7 +547,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
           } else {
             solver.Gather(static_cast<int>(r), c, height_at(i), scratch);
             solver.Weigh(scratch, sys);
-            solver.Finish(scratch, sys, &p, est, albedo);
+            solver.Finish(scratch, sys, &p, est, albedo, (state[i] & kLowConfidence) != 0);
           }
           store(i, est, albedo);
         }
