@@ -25,6 +25,7 @@ struct ScannerInfo {
   std::string model;
   std::string serial;
   std::string software;
+  nlohmann::json extra = nlohmann::json::object();  // vendor keys, kept as they are
 };
 
 struct SampleInfo {
@@ -32,6 +33,7 @@ struct SampleInfo {
   std::string description;
   std::optional<double> thickness_mm;
   std::optional<double> weight_gsm;
+  nlohmann::json extra = nlohmann::json::object();  // vendor keys, kept as they are
 };
 
 struct OutputSpec {
@@ -48,9 +50,12 @@ struct CameraPose {
   Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero(); // camera centre in world, mm
 };
 
+// Levels in the frame file's own code values: raw ADU for RAW files (overrides the file's own
+// black/white), 0..65535 for 16-bit TIFF/PNG, stored values for EXR. A linear value becomes
+// (v - black_level) / (white_level - black_level); v >= white_level is saturated.
 struct SensorResponse {
   double black_level = 0.0;
-  double white_level = 1.0;
+  double white_level = 65535.0;
 };
 
 struct CameraSpec {
@@ -61,6 +66,11 @@ struct CameraSpec {
   std::array<double, 5> distortion{};  // k1, k2, p1, p2, k3
   std::optional<CameraPose> pose;      // absent: found from a `board` frame
   std::optional<SensorResponse> response;
+  // RAW white-balance multipliers (R, G, B) applied to the sensor channels before demosaicing.
+  // Absent: the camera's as-shot white balance ("camera white balance unless the manifest says
+  // otherwise"); [1, 1, 1]: raw sensor colour. JSON key `white_balance` (a project extension).
+  std::optional<std::array<double, 3>> white_balance;
+  nlohmann::json extra = nlohmann::json::object();  // vendor keys, kept as they are
 };
 
 struct LightProfile {
@@ -76,11 +86,14 @@ struct LightSpec {
   std::optional<Eigen::Vector3d> position_mm;  // point lights
   std::optional<Eigen::Vector3d> direction;    // directional: unit, sample -> light
   Eigen::Vector3d intensity_rgb = Eigen::Vector3d::Ones();
-  std::optional<LightProfile> profile;
+  std::optional<LightProfile> profile;  // point lights only
+  nlohmann::json extra = nlohmann::json::object();  // vendor keys, kept as they are
 };
 
 enum class FrameRole { kSample, kAmbient, kDark, kFlat, kBoard, kSphere, kChart, kBacklight };
 const char* FrameRoleName(FrameRole role);
+// "sample" -> kSample, ...; nullopt for a name the contract does not know.
+std::optional<FrameRole> FrameRoleFromName(const std::string& name);
 
 struct FrameSpec {
   std::string file;              // relative to the capture folder, '/' separators
@@ -89,6 +102,7 @@ struct FrameSpec {
   std::string side = "front";    // "front" or "back"
   double exposure_s = 0.0;
   FrameRole role = FrameRole::kSample;
+  nlohmann::json extra = nlohmann::json::object();  // vendor keys, kept as they are
 };
 
 struct BoardTarget {
@@ -114,6 +128,7 @@ struct Targets {
   std::optional<WhiteTarget> white;
   std::optional<SphereTarget> sphere;
   std::optional<ChartTarget> chart;
+  nlohmann::json extra = nlohmann::json::object();  // vendor target kinds, kept as they are
 };
 
 struct Manifest {
@@ -132,14 +147,22 @@ struct Manifest {
   const LightSpec* FindLight(const std::string& id) const;
 };
 
-// Parses and checks capture.json in `capture_dir` (or a capture.json path). Checks include frame
-// files that exist, ids that resolve, lights with position or direction, positive exposures,
-// frames of one camera with the camera's size. Throws InputError on the first violation.
+inline constexpr const char* kManifestFileName = "capture.json";
+
+// Parses and checks capture.json in `capture_dir` (or a capture.json path): everything
+// ParseManifest checks, plus frame files that exist inside the folder (no symlink escapes) and
+// frame headers whose size equals their camera's width x height (headers only, no decoding).
+// Throws InputError(capture.json path, JSON pointer, expectation) on the first violation.
 Manifest ReadManifest(const std::filesystem::path& capture_dir_or_file);
-// Parses from an in-memory JSON text; `source_name` is used in messages. Does not check files.
+// Parses and checks an in-memory JSON text; `source_name` (the file) is used in messages.
+// Checks types, ranges, ids, references, roles and targets; does not touch the file system.
 Manifest ParseManifest(const std::string& json_text, const std::string& source_name);
+// The JSON a ParseManifest of it returns unchanged (vendor keys included).
 nlohmann::json ManifestToJson(const Manifest& manifest);
-// Writes capture.json into `capture_dir` atomically (temporary file, then rename).
+// Checks `manifest` as ParseManifest would (throws InputError naming the target file on a
+// violation, writing nothing), creates `capture_dir` if needed and writes capture.json into it
+// atomically (temporary file in the same folder, then rename). Frame files are not checked, so
+// a writer may write the manifest before or after its frames.
 void WriteManifest(const Manifest& manifest, const std::filesystem::path& capture_dir);
 
 }  // namespace u3mscan

@@ -1,0 +1,128 @@
+#pragma once
+// Calibrate: every calibration step a capture calls for, in order (dark/ambient, cameras, grid,
+// lights, flat fields, colour), each running only when the capture holds the frames it takes and
+// saying in CalibrationResult::steps what it did or why it was skipped. BuildStack then turns one
+// side's sample frames into the Stack (core/stack.h) that reconstruction and fitting consume.
+//
+// Bad calibration frames (board, sphere or chart not found, a flat darker than its sample frame)
+// give a message naming the frame; the step falls back to the manifest where it can (recorded in
+// `warnings`), and the capture is refused with InputError where it cannot (a camera with neither
+// a pose in the manifest nor a usable board frame).
+
+#include <Eigen/Core>
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "capture/calibration_frames.h"
+#include "capture/camera_model.h"
+#include "capture/colour_calibration.h"
+#include "capture/dark_ambient.h"
+#include "capture/light_calibration.h"
+#include "capture/manifest.h"
+#include "core/image.h"
+#include "core/progress.h"
+#include "core/stack.h"
+
+namespace u3mscan {
+
+class Capture;
+
+struct CalibrationOptions {
+  std::string side = "front";            // the side BuildStack builds
+  std::optional<double> dpi;             // overrides the manifest's output.dpi
+  std::optional<std::array<double, 4>> region_mm;  // overrides output.region_mm
+  bool calibrate_intrinsics = true;      // from board frames, when a camera has enough
+  int min_board_frames_for_intrinsics = 3;
+  int min_board_corners = 6;
+  bool use_mcc = true;                   // try cv::mcc before the known chart layout
+  ChartLayout chart_layout;              // where the chart lies when mcc finds none
+  bool apply_colour_correction = true;   // in BuildStack, when a chart was fitted
+  double min_flat_cos = 0.05;            // flat pixels with grazing light are not measured
+  // Mirror spheres found in their frames rest on the sample plane (centre z = radius), or sit at
+  // the height of the manifest's centre_mm when it gives one; false: the height is fitted too.
+  bool sphere_on_known_height = true;
+  LightFitOptions light_fit;             // highlight accuracy, manifest prior for point lights
+  bool Check() const;
+};
+
+struct StepReport {
+  std::string step;    // "dark/ambient", "camera top", "grid", "light L1", "flat top/L1/front", "colour"
+  bool ran = false;
+  std::string detail;  // what it did, or why it was skipped
+};
+
+struct CameraCalibration {
+  std::string id;
+  CameraModel model;
+  std::string intrinsics_source = "manifest";  // or "board frames"
+  std::string pose_source = "manifest";        // or "board frame <file>"
+  std::optional<double> reprojection_error_px;  // of the pose (or intrinsics fit) on board corners
+  std::vector<std::string> board_frames;        // used
+};
+
+struct LightCalibration {
+  LightModel model;
+  std::string source = "manifest";  // or "mirror sphere"
+  int placements = 0;
+  std::optional<double> residual;   // deg (directional) or mm (point); see LightFit
+  std::string residual_unit;
+  std::string note;
+  std::vector<std::string> sphere_frames;  // used
+};
+
+struct FlatCalibration {
+  std::string camera, light, side;
+  std::vector<std::string> frames;  // averaged
+  Image irradiance;                 // on the grid, units of LightModel::RelativeIrradianceAt
+};
+
+struct ColourCalibration {
+  bool fitted = false;
+  // Applied by BuildStack only when it brings the chart closer to its reference (mean CIEDE2000
+  // after < before): a camera already in sRGB gains nothing but noise from a 3x3 fit.
+  bool applied = false;
+  std::string frame;
+  std::string locator;  // "mcc" or "known layout"
+  ColourFit fit;
+};
+
+struct CalibrationResult {
+  std::string manifest_file;
+  MetricGrid grid;
+  std::vector<CameraCalibration> cameras;
+  std::vector<LightCalibration> lights;  // manifest order
+  DarkAmbient dark_ambient;
+  std::vector<FlatCalibration> flats;
+  ColourCalibration colour;
+  std::vector<StepReport> steps;
+  std::vector<std::string> warnings;  // bad calibration input that led to a fallback
+
+  const CameraCalibration* FindCamera(const std::string& id) const;
+  const LightCalibration* FindLight(const std::string& id) const;
+  const FlatCalibration* FindFlat(const std::string& camera, const std::string& light, const std::string& side) const;
+  // Everything above but the images: the content of calibration.json.
+  nlohmann::json ToJson() const;
+};
+
+CalibrationResult Calibrate(const Capture& capture, const CalibrationOptions& options,
+                            const ProgressCallback& progress = {});
+// The same on a manifest and any frame source (tests: frames made in memory).
+CalibrationResult Calibrate(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
+                            const ProgressCallback& progress = {}, const std::string& manifest_file = "capture.json");
+
+// One side's sample frames on the grid: dark/ambient taken away, rectified, divided by exposure and
+// the light's intensity, colour-corrected, flagged; measured irradiance where flats were taken.
+// Throws InputError when the side has no sample frames.
+Stack BuildStack(const Capture& capture, const CalibrationResult& calibration, const CalibrationOptions& options,
+                 const ProgressCallback& progress = {});
+Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const CalibrationResult& calibration,
+                 const CalibrationOptions& options, const ProgressCallback& progress = {});
+
+// The manifest's description of a light as a LightModel.
+LightModel LightModelFromSpec(const LightSpec& spec);
+
+}  // namespace u3mscan

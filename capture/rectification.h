@@ -1,0 +1,54 @@
+#pragma once
+// Rectification: every view (the oblique camera too) is undistorted and resampled onto the metric
+// grid of the sample plane (core/stack.h MetricGrid), so that pixel (i, j) of every frame sees the
+// same point of the fabric. The map of a camera is computed once from its pose and intrinsics
+// (each grid pixel centre projected through the lens) and applied with cv::remap; grid pixels the
+// camera does not see, and those that draw on saturated camera pixels, are flagged, never used.
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "capture/calibration_frames.h"
+#include "capture/camera_model.h"
+#include "capture/manifest.h"
+#include "core/image.h"
+#include "core/stack.h"
+
+namespace u3mscan {
+
+// The grid of the finished maps: `output.dpi` (default: the native resolution of the finest
+// camera at the region's centre, rounded down to a whole dpi) over `output.region_mm` (default:
+// the largest axis-aligned rectangle every camera sees whole). The grid keeps the region's
+// top-left corner; its size is the whole number of pixels that fit. Throws InputError (field
+// /output) when the region is empty or the cameras share no view of the plane.
+MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec& output,
+                      const std::string& manifest_file = "capture.json");
+
+// The rectangle [x0, y0, x1, y1] (mm, z = 0) that every camera sees whole.
+std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras);
+
+struct RectificationMap {
+  MetricGrid grid;
+  Image map;                              // 2 planes: camera x and y (px) of each grid pixel centre
+  std::vector<std::uint8_t> out_of_view;  // grid size, 1 = the camera does not see the point
+  double camera_px_per_grid_px = 1.0;     // at the grid's centre; > 1 means the grid is coarser
+  bool crop_and_scale = false;            // straight-down camera without distortion (an affine map)
+};
+
+// `height_mm`: the plane the map is computed for (0 = the sample plane).
+RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, double height_mm = 0.0);
+
+struct RectifiedFrame {
+  Image rgb;                          // grid size, pitch_mm = grid pitch
+  std::vector<std::uint8_t> flags;    // ObservationFlag bits (kSaturated, kOutOfView)
+};
+
+// Resamples `frame` (camera pixels) onto the map's grid (bilinear; when the grid is coarser than
+// the camera by more than 1.5x, a Gaussian pre-filter against aliasing).
+RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map);
+// The same for any image (all channels), without flags.
+Image RectifyImage(const Image& image, const RectificationMap& map);
+
+}  // namespace u3mscan

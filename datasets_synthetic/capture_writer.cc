@@ -1,0 +1,377 @@
+#include "datasets_synthetic/capture_writer.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <system_error>
+#include <vector>
+
+#include "capture/dng_writer.h"
+#include "capture/manifest.h"
+#include "core/error.h"
+#include "core/logging.h"
+#include "core/units.h"
+#include "datasets_synthetic/calibration_frames.h"
+#include "datasets_synthetic/renderer.h"
+#include "datasets_synthetic/sensor.h"
+#include "u3m/image_io.h"
+
+namespace u3mscan::synthetic {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+const char* FrameExtension(FrameFormat format) {
+  switch (format) {
+    case FrameFormat::kDng: return ".dng";
+    case FrameFormat::kTiff: return ".tif";
+    case FrameFormat::kExr: return ".exr";
+  }
+  return ".dng";
+}
+
+// One frame to render: what it is in the manifest and how to make its linear image.
+struct FrameJob {
+  FrameSpec spec;
+  int camera = 0;
+  std::function<Image(SceneRenderer&)> render;
+};
+
+// The light closest to the zenith lights the board and chart frames most evenly.
+int HighestLight(const Rig& rig) {
+  int best = 0;
+  double best_z = -2;
+  for (std::size_t i = 0; i < rig.lights.size(); ++i) {
+    const RigLight& l = rig.lights[i];
+    const double z = l.type == RigLightType::kDirectional ? l.direction.z() : l.position_mm.normalized().z();
+    if (z > best_z) {
+      best_z = z;
+      best = static_cast<int>(i);
+    }
+  }
+  return best;
+}
+
+bool HasHoles(const SceneTruth& scene) {
+  for (float a : scene.alpha.plane(0)) {
+    if (a < 1.0f) return true;
+  }
+  return false;
+}
+
+std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
+                                 const CalibrationTargets& targets) {
+  std::vector<FrameJob> jobs;
+  const std::string ext = FrameExtension(options.format);
+  auto add = [&](int camera, const std::string& file, FrameRole role, std::optional<int> light,
+                 std::function<Image(SceneRenderer&)> render) {
+    FrameJob job;
+    job.camera = camera;
+    job.spec.file = file;
+    job.spec.camera = rig.cameras[camera].id;
+    if (light) job.spec.light = rig.lights[*light].id;
+    job.spec.exposure_s = rig.exposure_s;
+    job.spec.role = role;
+    job.render = std::move(render);
+    jobs.push_back(std::move(job));
+  };
+  const int board_light = HighestLight(rig);
+  const bool ambient = rig.ambient_irradiance > 0;
+  for (int c = 0; c < static_cast<int>(rig.cameras.size()); ++c) {
+    const std::string cam = rig.cameras[c].id;
+    for (int l = 0; l < static_cast<int>(rig.lights.size()); ++l) {
+      add(c, "frames/" + cam + "/" + rig.lights[l].id + ext, FrameRole::kSample, l, [l, ambient](SceneRenderer& r) {
+        Image img = r.RenderLight(l);
+        if (ambient) {
+          const Image& amb = r.AmbientImage();
+          for (std::size_t i = 0; i < img.data().size(); ++i) img.data()[i] += amb.data()[i];
+        }
+        return img;
+      });
+    }
+    if (ambient) add(c, "frames/" + cam + "/ambient" + ext, FrameRole::kAmbient, std::nullopt, [](SceneRenderer& r) { return r.AmbientImage(); });
+    if (!options.calibration_frames) continue;
+    const std::string dir = "calibration/" + cam + "/";
+    add(c, dir + "dark" + ext, FrameRole::kDark, std::nullopt, [&rig, c](SceneRenderer&) { return RenderDarkFrame(rig, c); });
+    for (int l = 0; l < static_cast<int>(rig.lights.size()); ++l) {
+      add(c, dir + "flat_" + rig.lights[l].id + ext, FrameRole::kFlat, l,
+          [&rig, &targets, c, l](SceneRenderer&) { return RenderFlatFrame(rig, c, targets, l); });
+    }
+    add(c, dir + "board" + ext, FrameRole::kBoard, board_light,
+        [&rig, &targets, c, board_light](SceneRenderer&) { return RenderBoardFrame(rig, c, targets, board_light); });
+    if (HasHoles(scene)) {
+      const double level = targets.backlight_level;
+      add(c, dir + "backlight" + ext, FrameRole::kBacklight, std::nullopt, [level](SceneRenderer& r) {
+        const Image a = r.RenderBacklight(level);
+        Image rgb(a.width(), a.height(), 3);
+        for (int ch = 0; ch < 3; ++ch) std::copy(a.plane(0).begin(), a.plane(0).end(), rgb.plane(ch).begin());
+        return rgb;
+      });
+    }
+    if (c != 0) continue;  // lights and colour are calibrated from the top camera
+    for (std::size_t p = 0; p < targets.sphere_centers_mm.size(); ++p) {
+      for (int l = 0; l < static_cast<int>(rig.lights.size()); ++l) {
+        add(c, dir + "sphere_p" + std::to_string(p) + "_" + rig.lights[l].id + ext, FrameRole::kSphere, l,
+            [&rig, &targets, c, l, p](SceneRenderer&) { return RenderSphereFrame(rig, c, targets, l, static_cast<int>(p)); });
+        jobs.back().spec.extra["sphere_placement"] = p;
+      }
+    }
+    add(c, dir + "chart" + ext, FrameRole::kChart, board_light,
+        [&rig, &targets, c, board_light](SceneRenderer&) { return RenderChartFrame(rig, c, targets, board_light); });
+  }
+  return jobs;
+}
+
+Manifest BuildManifest(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
+                       const CalibrationTargets& targets, const std::vector<FrameJob>& jobs) {
+  Manifest m;
+  m.scanner = {"u3mscan", "synthetic " + rig.name, "seed " + std::to_string(rig.seed), options.scanner_software, json::object()};
+  m.sample.name = scene.name;
+  m.sample.description = "synthetic scene '" + scene.name + "' rendered with rig '" + rig.name + "'";
+  // The maps cover exactly the sample's truth grid, so finished maps and truth maps align pixel for pixel.
+  const double half_w = 0.5 * scene.height_mm.width() * scene.pitch_mm, half_h = 0.5 * scene.height_mm.height() * scene.pitch_mm;
+  m.output.dpi = PitchMmToDpi(scene.pitch_mm);
+  m.output.region_mm = std::array<double, 4>{-half_w, -half_h, half_w, half_h};
+  for (const RigCamera& rc : rig.cameras) {
+    CameraSpec c;
+    c.id = rc.id;
+    c.width = rc.width;
+    c.height = rc.height;
+    c.intrinsics = {rc.fx, rc.fy, rc.cx, rc.cy};
+    c.distortion = rc.distortion;
+    if (options.write_pose) c.pose = CameraPose{rc.world_from_camera, rc.position_mm};
+    switch (options.format) {
+      case FrameFormat::kDng:
+        c.white_balance = std::array<double, 3>{1.0, 1.0, 1.0};  // raw sensor colour = linear sRGB here
+        break;
+      case FrameFormat::kTiff:
+        c.response = SensorResponse{0.0, 65535.0};
+        break;
+      case FrameFormat::kExr:
+        c.response = SensorResponse{0.0, 1.0};
+        break;
+    }
+    m.cameras.push_back(std::move(c));
+  }
+  for (const RigLight& rl : rig.lights) {
+    LightSpec l;
+    l.id = rl.id;
+    l.intensity_rgb = rl.intensity_rgb;
+    if (rl.type == RigLightType::kPoint) {
+      l.type = ManifestLightType::kPoint;
+      l.position_mm = rl.position_mm;
+      if (rl.profile_exponent > 0) l.profile = LightProfile{rl.profile_axis, rl.profile_exponent};
+    } else {
+      l.type = ManifestLightType::kDirectional;
+      l.direction = rl.direction;
+    }
+    m.lights.push_back(std::move(l));
+  }
+  for (const FrameJob& job : jobs) m.frames.push_back(job.spec);
+  if (options.calibration_frames) {
+    const BoardSpec& b = targets.board;
+    m.targets.board = BoardTarget{b.squares_x, b.squares_y, b.square_mm, b.marker_mm, b.dictionary};
+    m.targets.white = WhiteTarget{targets.white_reflectance};
+    SphereTarget sphere;
+    sphere.radius_mm = targets.sphere_radius_mm;
+    if (targets.sphere_centers_mm.size() == 1) sphere.center_mm = targets.sphere_centers_mm[0];
+    m.targets.sphere = sphere;
+    m.targets.chart = ChartTarget{"macbeth24"};
+  }
+  return m;
+}
+
+json Vec(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+json RigTruth(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options, const CalibrationTargets& t) {
+  json cams = json::array();
+  for (const RigCamera& c : rig.cameras) {
+    json r = json::array();
+    for (int i = 0; i < 3; ++i) r.push_back({c.world_from_camera(i, 0), c.world_from_camera(i, 1), c.world_from_camera(i, 2)});
+    const char* vig = c.vignetting == VignettingModel::kNone ? "none" : c.vignetting == VignettingModel::kCos4 ? "cos4" : "polynomial";
+    cams.push_back({{"id", c.id}, {"width", c.width}, {"height", c.height},
+                    {"intrinsics", {{"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx}, {"cy", c.cy}}},
+                    {"distortion", c.distortion},
+                    {"world_from_camera", {{"rotation", r}, {"translation_mm", Vec(c.position_mm)}}},
+                    {"vignetting", {{"model", vig}, {"coefficients", c.vignetting_poly}}}});
+  }
+  json lights = json::array();
+  for (const RigLight& l : rig.lights) {
+    json j = {{"id", l.id}, {"intensity", Vec(l.intensity_rgb)}};
+    if (l.type == RigLightType::kPoint) {
+      j["type"] = "point";
+      j["position_mm"] = Vec(l.position_mm);
+      j["profile"] = {{"axis", Vec(l.profile_axis)}, {"exponent", l.profile_exponent}};
+      j["emitter_radius_mm"] = l.emitter_radius;
+    } else {
+      j["type"] = "directional";
+      j["direction"] = Vec(l.direction);
+      j["emitter_radius_deg"] = l.emitter_radius;
+    }
+    lights.push_back(j);
+  }
+  const SensorSpec& s = rig.sensor;
+  json patches = json::array();
+  for (int k = 0; k < 24; ++k) patches.push_back(Vec(ColorCheckerLinear(k)));
+  json sphere_centers = json::array();
+  for (const auto& c : t.sphere_centers_mm) sphere_centers.push_back(Vec(c));
+  const double half_w = 0.5 * scene.height_mm.width() * scene.pitch_mm, half_h = 0.5 * scene.height_mm.height() * scene.pitch_mm;
+  return {
+      {"name", rig.name},
+      {"seed", rig.seed},
+      {"frame_format", FrameFormatName(options.format)},
+      {"sample_rect_mm", {-half_w, -half_h, half_w, half_h}},
+      {"sample_pitch_mm", scene.pitch_mm},
+      {"cameras", cams},
+      {"lights", lights},
+      {"sensor",
+       {{"bit_depth", s.bit_depth}, {"black_level_dn", s.black_level_dn}, {"white_level_dn", s.white_level_dn},
+        {"full_well_e", s.full_well_e}, {"read_noise_e", s.read_noise_e}, {"fixed_pattern_dn", s.fixed_pattern_dn},
+        {"cfa", "RGGB"}}},
+      {"exposure_s", rig.exposure_s},
+      {"ambient_irradiance", rig.ambient_irradiance},
+      {"table_reflectance", rig.table_reflectance},
+      {"ground_pitch_mm", rig.ground_pitch_mm},
+      {"targets",
+       {{"board",
+         {{"squares_x", t.board.squares_x}, {"squares_y", t.board.squares_y}, {"square_mm", t.board.square_mm},
+          {"marker_mm", t.board.marker_mm}, {"dictionary", t.board.dictionary},
+          {"world_from_board", {{"rotation", {{1, 0, 0}, {0, -1, 0}, {0, 0, -1}}},
+                                {"translation_mm", {t.board.origin_mm[0], t.board.origin_mm[1], 0.0}}}}}},
+        {"white_reflectance", t.white_reflectance},
+        {"sphere", {{"radius_mm", t.sphere_radius_mm}, {"centers_mm", sphere_centers}, {"highlight_level", t.sphere_highlight_level}}},
+        {"chart", {{"type", "macbeth24"}, {"rect_mm", t.chart_rect_mm}, {"patch_mm", t.chart_patch_mm}, {"patches_linear_srgb", patches}}},
+        {"backlight_level", t.backlight_level}}},
+      {"units",
+       {{"length", "mm"}, {"angle", "deg"}, {"time", "s"},
+        {"intensity", "contract units: decoded value = exposure_s * f * cos * intensity * profile / d_mm^2 (point) or * intensity (directional)"},
+        {"frame", "world: sample plane z = 0, +z toward the camera, +x right, +y up; poses world_from_camera, OpenCV camera axes"}}},
+  };
+}
+
+void WriteJsonAtomically(const json& j, const fs::path& path) {
+  const fs::path temp = path.string() + ".partial";
+  {
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    out << j.dump(2) << "\n";
+    if (!out) throw InputError(path.string(), "", "a writable location");
+  }
+  fs::rename(temp, path);
+}
+
+void WriteFrame(const RawFrame& raw, const SensorSpec& sensor, FrameFormat format, const fs::path& path) {
+  fs::create_directories(path.parent_path());
+  if (format == FrameFormat::kDng) {
+    DngWriteOptions dng;
+    dng.pattern = CfaPattern::kRggb;
+    dng.black_level = static_cast<std::uint16_t>(sensor.black_level_dn);
+    dng.white_level = static_cast<std::uint16_t>(sensor.white_level_dn);
+    WriteDng(path, raw.dn, raw.width, raw.height, dng);
+    return;
+  }
+  ImageWriteOptions w;
+  w.encoding = PixelEncoding::kLinear;
+  w.format = format == FrameFormat::kTiff ? SampleFormat::kUInt16 : SampleFormat::kFloat32;
+  WriteImageFile(RawToLinear(raw, sensor), path, w);
+}
+
+// A frame's noise stream is named by its path without the extension, so the DNG, TIFF and EXR
+// captures of one seed carry the same noise.
+std::string NoiseName(const std::string& file) { return fs::path(file).replace_extension().generic_string(); }
+
+void WriteEverything(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options, const fs::path& root,
+                     const TruthWriter& truth_writer, CaptureStats* stats) {
+  const CalibrationTargets targets = MakeCalibrationTargets(rig);
+  const std::vector<FrameJob> jobs = PlanFrames(scene, rig, options, targets);
+  const fs::path capture_dir = root / kCaptureSubdir;
+  fs::create_directories(capture_dir);
+  SceneRenderer renderer(scene, rig);
+  for (std::size_t k = 0; k < jobs.size(); ++k) {
+    const FrameJob& job = jobs[k];
+    const RigCamera& cam = rig.cameras[job.camera];
+    const auto start = Clock::now();
+    if (renderer.camera_index() != job.camera) renderer.SetCamera(job.camera);
+    const Image linear = job.render(renderer);
+    const RawFrame raw = ExposeSensor(linear, rig.sensor, FrameSeed(rig.seed, "camera:" + cam.id),
+                                      FrameSeed(rig.seed, NoiseName(job.spec.file)), options.format == FrameFormat::kDng);
+    stats->render_seconds += Seconds(start);
+    stats->megapixels_rendered += 1e-6 * cam.width * cam.height;
+    WriteFrame(raw, rig.sensor, options.format, capture_dir / job.spec.file);
+    ++stats->frames;
+    ReportProgress(options.progress, "synth", static_cast<double>(k + 1) / jobs.size());
+  }
+  WriteManifest(BuildManifest(scene, rig, options, targets, jobs), capture_dir);
+
+  const fs::path truth_dir = root / kTruthSubdir;
+  fs::create_directories(truth_dir);
+  if (truth_writer) truth_writer(scene, truth_dir);
+  const fs::path truth_file = truth_dir / kTruthFileName;
+  json truth = json::object();
+  if (fs::exists(truth_file)) {
+    std::ifstream in(truth_file);
+    truth = json::parse(in);
+  }
+  truth["rig"] = RigTruth(scene, rig, options, targets);
+  WriteJsonAtomically(truth, truth_file);
+}
+
+}  // namespace
+
+const char* FrameFormatName(FrameFormat format) {
+  switch (format) {
+    case FrameFormat::kDng: return "dng";
+    case FrameFormat::kTiff: return "tiff";
+    case FrameFormat::kExr: return "exr";
+  }
+  return "dng";
+}
+
+std::optional<FrameFormat> FrameFormatFromName(const std::string& name) {
+  if (name == "dng") return FrameFormat::kDng;
+  if (name == "tiff" || name == "tif") return FrameFormat::kTiff;
+  if (name == "exr") return FrameFormat::kExr;
+  return std::nullopt;
+}
+
+CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
+                                   const fs::path& out_dir, const TruthWriter& truth_writer) {
+  const auto start = Clock::now();
+  std::error_code ec;
+  if (fs::exists(out_dir, ec) && !(fs::is_directory(out_dir, ec) && fs::is_empty(out_dir, ec))) {
+    throw InputError(out_dir.string(), "", "an output folder that does not exist yet or is empty");
+  }
+  const fs::path target = fs::absolute(out_dir).lexically_normal();
+  const fs::path parent = target.parent_path();
+  fs::create_directories(parent, ec);
+  if (ec) throw InputError(out_dir.string(), "", "a parent folder that can be created: " + ec.message());
+  // Built with append() rather than operator+ on a literal: GCC 12 warns falsely (-Wrestrict) there.
+  std::string temp_name = ".";
+  temp_name.append(target.filename().string()).append(".partial-").append(std::to_string(::getpid()));
+  const fs::path temp = parent / temp_name;
+  fs::remove_all(temp, ec);
+  CaptureStats stats;
+  try {
+    fs::create_directories(temp);
+    WriteEverything(scene, rig, options, temp, truth_writer, &stats);
+    if (fs::exists(target)) fs::remove(target);  // the empty folder the caller may have made
+    fs::rename(temp, target);
+  } catch (...) {
+    std::error_code ignored;
+    fs::remove_all(temp, ignored);
+    throw;
+  }
+  stats.total_seconds = Seconds(start);
+  LogInfo() << "synth: " << stats.frames << " frames, " << stats.megapixels_rendered << " MP rendered at "
+            << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s in all) -> " << target.string();
+  return stats;
+}
+
+}  // namespace u3mscan::synthetic

@@ -1,0 +1,68 @@
+#pragma once
+// The synthetic scanner's output: a capture folder exactly as a physical scanner would write it
+// (docs/capture-format.md) plus the ground truth beside it:
+//
+//   DIR/capture/capture.json          the manifest (capture/manifest.h WriteManifest)
+//   DIR/capture/frames/<camera>/...   sample and ambient frames
+//   DIR/capture/calibration/<camera>/ dark, flat, board, sphere, chart, backlight frames
+//   DIR/truth/truth.json              rig geometry, sensor, targets, units (+ the scene's own truth)
+//   DIR/truth/...                     the scene's maps (written by the caller's truth writer)
+//
+// Frames are rendered, exposed and written one at a time, so a 36-megapixel capture needs memory
+// for one frame (plus the scene and one camera's ray hits), not for all of them. Atomic: all of
+// it is written into a hidden sibling folder that is renamed to DIR at the end; a failure removes
+// it and leaves no DIR.
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "core/progress.h"
+#include "datasets_synthetic/rig.h"
+#include "datasets_synthetic/scene.h"
+
+namespace u3mscan::synthetic {
+
+enum class FrameFormat {
+  kDng,   // RGGB Bayer mosaic, 16-bit DNG with the sensor's black and white level (libraw decodes it)
+  kTiff,  // 16-bit RGB TIFF of the decoded value (black subtracted, 65535 = white level)
+  kExr,   // float RGB EXR of the decoded value (1.0 = white level), same quantisation as the sensor
+};
+const char* FrameFormatName(FrameFormat format);
+// "dng", "tiff"/"tif", "exr"; nullopt otherwise.
+std::optional<FrameFormat> FrameFormatFromName(const std::string& name);
+
+// Writes the scene's truth maps and truth.json into a folder (the scenes' WriteTruth). The capture
+// writer then adds its "rig" section to truth.json.
+using TruthWriter = std::function<void(const SceneTruth& scene, const std::filesystem::path& truth_dir)>;
+
+struct CaptureOptions {
+  FrameFormat format = FrameFormat::kDng;
+  bool calibration_frames = true;  // dark, flat, board, sphere, chart, backlight
+  bool write_pose = true;          // false: cameras without pose, calibration must find it (board)
+  std::string scanner_software = "u3mscan";
+  ProgressCallback progress;
+  bool Check() const { return true; }
+};
+
+struct CaptureStats {
+  int frames = 0;
+  double megapixels_rendered = 0;  // camera pixels rendered, summed over frames
+  double render_seconds = 0;       // ray tracing, shading and the sensor model, not file writing
+  double total_seconds = 0;
+  double MegapixelsPerSecond() const { return render_seconds > 0 ? megapixels_rendered / render_seconds : 0; }
+};
+
+// Renders and writes DIR. `out_dir` must not exist, or be an empty folder. Throws InputError
+// naming out_dir when it cannot be used; any failure leaves no DIR behind.
+CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
+                                   const std::filesystem::path& out_dir, const TruthWriter& truth_writer = {});
+
+// Relative paths of the folders inside DIR.
+inline constexpr const char* kCaptureSubdir = "capture";
+inline constexpr const char* kTruthSubdir = "truth";
+inline constexpr const char* kTruthFileName = "truth.json";
+
+}  // namespace u3mscan::synthetic

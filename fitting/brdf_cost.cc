@@ -1,0 +1,251 @@
+// The only translation unit that instantiates the core BRDF on ceres::Jet: automatic
+// differentiation compiles slowly, so every templated evaluation of the fitter lives here.
+#include "fitting/brdf_cost.h"
+
+#include <ceres/autodiff_cost_function.h>
+#include <ceres/jet.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "core/principled_brdf.h"
+
+namespace u3mscan::fitting {
+namespace {
+
+// Luminance weights of the Principled tint (core/principled_brdf.h TintColor).
+constexpr double kLumR = 0.3;
+constexpr double kLumG = 0.6;
+constexpr double kLumB = 0.1;
+// Smallest luminance the fixed-point passes use: a black pixel gives the core's white tint anyway.
+constexpr double kMinLuminance = 1e-6;
+// Guards a weighted normal equation whose diagonal vanishes (no diffuse signal at all).
+constexpr double kTinyNormal = 1e-300;
+// A secant step is taken only when the slope estimate is not lost in rounding.
+constexpr double kTinySecant = 1e-12;
+// Below this squared residual the Cauchy factor is 1 to rounding; avoids 0/0.
+constexpr double kTinySquaredResidual = 1e-20;
+
+template <typename T>
+PrincipledParams<T> ToPrincipled(const T* p, const Vec3<T>& base_color) {
+  PrincipledParams<T> out;
+  out.base_color = base_color;
+  out.roughness = p[static_cast<int>(FitParameter::kRoughness)];
+  out.specular = p[static_cast<int>(FitParameter::kSpecular)];
+  out.specular_tint = p[static_cast<int>(FitParameter::kSpecularTint)];
+  out.sheen = p[static_cast<int>(FitParameter::kSheen)];
+  out.sheen_tint = p[static_cast<int>(FitParameter::kSheenTint)];
+  out.anisotropic = p[static_cast<int>(FitParameter::kAnisotropic)];
+  out.metallic = p[static_cast<int>(FitParameter::kMetallic)];
+  // Fabric: no clearcoat, no subsurface term (the core defaults clearcoat_gloss only matter when
+  // clearcoat > 0).
+  out.subsurface = T(0);
+  out.clearcoat = T(0);
+  return out;
+}
+
+// Factor that turns a residual of squared norm `sq` into one of squared norm rho(sq).
+template <typename T>
+T RobustFactor(const T& sq, const RobustLoss& loss) {
+  using std::log;
+  using std::sqrt;
+  const double a = loss.scale;
+  switch (loss.kind) {
+    case RobustLossKind::kNone:
+      return T(1);
+    case RobustLossKind::kHuber:
+      // rho(s) = s for s <= a^2, 2 a sqrt(s) - a^2 beyond.
+      if (sq > T(a * a)) {
+        const T norm = sqrt(sq);
+        return sqrt(T(2 * a) * norm - T(a * a)) / norm;
+      }
+      return T(1);
+    case RobustLossKind::kCauchy:
+      // rho(s) = a^2 log(1 + s / a^2).
+      if (sq > T(kTinySquaredResidual)) return T(a) * sqrt(log(T(1) + sq / T(a * a)) / sq);
+      return T(1);
+  }
+  return T(1);
+}
+
+// Core of the cost for any scalar type. `scratch` holds 2 values per observation (A_o, s_o).
+template <typename T>
+Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observations, const PixelCostSettings& settings,
+                        T* residuals, std::vector<T>& scratch) {
+  using std::abs;
+  const std::size_t n = observations.size();
+  scratch.resize(2 * n);
+  T luminance = T(std::max(settings.luminance_start, kMinLuminance));
+  Vec3<T> color = Vec3<T>::Zero();
+  const int passes = std::max(1, settings.luminance_passes);
+  // Fixed point l = lum(C(l)) by the secant method on h(l) = lum(C(l)) - l (plain substitution
+  // for the second pass): converges superlinearly, where substitution alone contracts only by the
+  // ratio of tinted to diffuse signal per pass.
+  T previous_luminance = luminance;
+  T previous_h = T(0);
+  for (int pass = 0; pass < passes; ++pass) {
+    if (pass > 0) {
+      const T g = T(kLumR) * color(0) + T(kLumG) * color(1) + T(kLumB) * color(2);
+      const T h = g - luminance;
+      T next = g;
+      if (pass > 1) {
+        const T dh = h - previous_h;
+        if (abs(dh) > T(kTinySecant) * abs(h) + T(kTinyNormal)) next = luminance - h * (luminance - previous_luminance) / dh;
+      }
+      previous_luminance = luminance;
+      previous_h = h;
+      luminance = next < T(kMinLuminance) ? T(kMinLuminance) : next;
+    }
+    // Probe colour of luminance l: its tint is (1/0.3, 0, 0), the tint of every colour of that
+    // luminance scaled the same way, so f(probe) separates A (red minus green) from s (green).
+    const Vec3<T> probe(luminance / T(kLumR), T(0), T(0));
+    const PrincipledParams<T> params = ToPrincipled(p, probe);
+    T num[3] = {T(0), T(0), T(0)};
+    T den[3] = {T(0), T(0), T(0)};
+    for (std::size_t i = 0; i < n; ++i) {
+      const LocalObservation& o = observations[i];
+      const Vec3<T> l = o.light_local.cast<T>();
+      const Vec3<T> v = o.view_local.cast<T>();
+      const Vec3<T> f = EvaluatePrincipled(params, l, v);
+      const double geometry = o.light_local.z() * o.irradiance;  // cos_l * E
+      const T a = (f(0) - f(1)) * (T(kLumR) * geometry) / luminance;
+      const T s = f(1) * geometry;
+      scratch[2 * i] = a;
+      scratch[2 * i + 1] = s;
+      for (int c = 0; c < 3; ++c) {
+        const double w2 = o.weight(c) * o.weight(c);
+        num[c] += w2 * a * (T(o.rgb(c)) - s);
+        den[c] += w2 * a * a;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      color(c) = den[c] > T(kTinyNormal) ? num[c] / den[c] : T(0);
+    }
+  }
+  if (residuals != nullptr) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const LocalObservation& o = observations[i];
+      const T& a = scratch[2 * i];
+      const T& s = scratch[2 * i + 1];
+      T r[3];
+      for (int c = 0; c < 3; ++c) r[c] = (a * color(c) + s - T(o.rgb(c))) * o.weight(c);
+      const T factor = RobustFactor(r[0] * r[0] + r[1] * r[1] + r[2] * r[2], settings.loss);
+      for (int c = 0; c < 3; ++c) residuals[3 * i + c] = r[c] * factor;
+    }
+  }
+  return color;
+}
+
+struct PixelFunctor {
+  std::span<const LocalObservation> observations;
+  PixelCostSettings settings;
+
+  template <typename T>
+  bool operator()(const T* roughness, const T* specular, const T* specular_tint, const T* sheen,
+                  const T* sheen_tint, const T* anisotropic, const T* metallic, T* residuals) const {
+    const T p[kFitParameterCount] = {*roughness, *specular, *specular_tint, *sheen,
+                                     *sheen_tint, *anisotropic, *metallic};
+    std::vector<T> scratch;
+    PixelResidualsT<T>(p, observations, settings, residuals, scratch);
+    return true;
+  }
+};
+
+using PixelAutoDiff = ceres::AutoDiffCostFunction<PixelFunctor, ceres::DYNAMIC, 1, 1, 1, 1, 1, 1, 1>;
+
+}  // namespace
+
+const char* FitParameterName(FitParameter parameter) {
+  switch (parameter) {
+    case FitParameter::kRoughness: return "roughness";
+    case FitParameter::kSpecular: return "specular";
+    case FitParameter::kSpecularTint: return "specular_tint";
+    case FitParameter::kSheen: return "sheen";
+    case FitParameter::kSheenTint: return "sheen_tint";
+    case FitParameter::kAnisotropic: return "anisotropic";
+    case FitParameter::kMetallic: return "metallic";
+  }
+  throw std::logic_error("FitParameterName: unknown parameter");
+}
+
+double FitParameterDefault(FitParameter parameter) {
+  // docs/u3m-conventions.md: roughness 0.7, specular 0.5, metalness, sheen and tints 0.
+  switch (parameter) {
+    case FitParameter::kRoughness: return 0.7;
+    case FitParameter::kSpecular: return 0.5;
+    default: return 0.0;
+  }
+}
+
+ParameterVector DefaultParameters() {
+  ParameterVector out{};
+  for (int i = 0; i < kFitParameterCount; ++i) out[i] = FitParameterDefault(static_cast<FitParameter>(i));
+  return out;
+}
+
+int LuminancePassesFor(const ParameterVector& params, const ParameterMask& free, int tinted_passes) {
+  const int st = static_cast<int>(FitParameter::kSpecularTint);
+  const int sht = static_cast<int>(FitParameter::kSheenTint);
+  const bool tinted = free[st] || free[sht] || params[st] != 0.0 || params[sht] != 0.0;
+  return tinted ? std::max(1, tinted_passes) : 1;
+}
+
+Eigen::Vector3d SolveBaseColor(const ParameterVector& params, std::span<const LocalObservation> observations,
+                               const PixelCostSettings& settings) {
+  thread_local std::vector<double> scratch;
+  return PixelResidualsT<double>(params.data(), observations, settings, nullptr, scratch);
+}
+
+double PixelResiduals(const ParameterVector& params, std::span<const LocalObservation> observations,
+                      const PixelCostSettings& settings, double* residuals, Eigen::Vector3d* base_color) {
+  thread_local std::vector<double> scratch;
+  const Eigen::Vector3d color = PixelResidualsT<double>(params.data(), observations, settings, residuals, scratch);
+  if (base_color != nullptr) *base_color = color;
+  double cost = 0.0;
+  for (std::size_t i = 0; i < 3 * observations.size(); ++i) cost += residuals[i] * residuals[i];
+  return 0.5 * cost;
+}
+
+ceres::CostFunction* MakePixelCostFunction(std::span<const LocalObservation> observations,
+                                           const PixelCostSettings& settings) {
+  if (observations.empty()) throw std::invalid_argument("MakePixelCostFunction: no observations");
+  return new PixelAutoDiff(new PixelFunctor{observations, settings}, static_cast<int>(3 * observations.size()));
+}
+
+bool EvaluatePixelJacobian(const ParameterVector& params, std::span<const LocalObservation> observations,
+                           const PixelCostSettings& settings, Eigen::VectorXd* residuals,
+                           Eigen::MatrixXd* jacobian) {
+  const std::unique_ptr<ceres::CostFunction> cost(MakePixelCostFunction(observations, settings));
+  const int m = static_cast<int>(3 * observations.size());
+  residuals->resize(m);
+  // One column per parameter block of size 1; Eigen's default column-major storage makes each
+  // column a contiguous m-vector, which is the row-major m x 1 block Ceres writes.
+  jacobian->resize(m, kFitParameterCount);
+  const double* parameter_blocks[kFitParameterCount];
+  double* jacobian_blocks[kFitParameterCount];
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    parameter_blocks[i] = &params[i];
+    jacobian_blocks[i] = jacobian->col(i).data();
+  }
+  return cost->Evaluate(parameter_blocks, residuals->data(), jacobian_blocks);
+}
+
+Eigen::Vector3d RenderLocal(const ParameterVector& params, const Eigen::Vector3d& base_color,
+                            const Eigen::Vector3d& light_local, const Eigen::Vector3d& view_local,
+                            double irradiance) {
+  const PrincipledParams<double> p = ToPrincipled(params.data(), Vec3<double>(base_color));
+  const Vec3<double> f = EvaluatePrincipled(p, Vec3<double>(light_local), Vec3<double>(view_local));
+  return f * (std::max(0.0, light_local.z()) * irradiance);
+}
+
+double GrazingWeight(const LocalObservation& observation) {
+  Eigen::Vector3d h = observation.light_local + observation.view_local;
+  const double len = h.norm();
+  if (len < brdf::kTinyLength) return 0.0;
+  h /= len;
+  return brdf::SchlickWeight(observation.light_local.dot(h));
+}
+
+}  // namespace u3mscan::fitting

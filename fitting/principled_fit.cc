@@ -1,0 +1,982 @@
+#include "fitting/principled_fit.h"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+
+#include "core/logging.h"
+#include "core/parallel.h"
+
+namespace u3mscan::fitting {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using Matrix7 = Eigen::Matrix<double, kFitParameterCount, kFitParameterCount>;
+
+constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
+constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
+constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
+constexpr int kSheenTint = static_cast<int>(FitParameter::kSheenTint);
+constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
+constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
+constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
+
+// Coarse start grid (roughness, specular, sheen). Roughness starts above sqrt(kMinAlpha) = 0.032,
+// where GGX's alpha clamp would zero its derivative.
+constexpr double kRoughnessGrid[] = {0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
+constexpr double kSpecularGrid[] = {0.0, 0.25, 0.5, 0.75, 1.0};
+constexpr double kSheenGrid[] = {0.0, 0.35, 0.7, 1.0};
+// The sheen grid is searched only when some observation has a Schlick weight above this.
+constexpr double kSheenGridMinGrazing = 0.01;
+// Pixels of the observation image sampled for its median luminance (the noise floor level).
+constexpr int kLevelSamples = 4096;
+// Normals whose length is outside this band are missing data, not unit vectors.
+constexpr double kMinNormalLength = 0.5;
+constexpr double kMaxNormalLength = 1.5;
+// Smallest luminance to start the base-colour fixed point from.
+constexpr double kMinStartLuminance = 1e-3;
+// Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
+constexpr double kPixelStep = 1e-4;
+// Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
+constexpr double kMetallicStart = 0.7;
+// Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
+// whose cost does not drop within them keeps the cluster value; this is the cheap stage).
+constexpr double kMinStepScale = 0.3;
+// Largest number of parameters the per-pixel step refines (roughness, specular).
+constexpr int kMaxPixelParameters = 2;
+
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+double Luminance(const Eigen::Vector3d& c) { return 0.3 * c(0) + 0.6 * c(1) + 0.1 * c(2); }
+
+// Per-observation constants of the stack.
+struct ObservationInfo {
+  const Observation* observation = nullptr;
+  const LightModel* light = nullptr;
+  const ViewGeometry* view = nullptr;
+  double level = 1.0;  // median luminance: the scale of the noise floor
+};
+
+// Everything the per-pixel gathering reads.
+struct FitContext {
+  const Stack* stack = nullptr;
+  const SurfaceGeometry* geometry = nullptr;
+  const FitOptions* options = nullptr;
+  std::vector<ObservationInfo> observations;
+};
+
+double MedianLuminance(const Observation& o, std::size_t pixel_count) {
+  std::vector<float> values;
+  const std::size_t step = std::max<std::size_t>(1, pixel_count / kLevelSamples);
+  const auto r = o.rgb.plane(0), g = o.rgb.plane(1), b = o.rgb.plane(2);
+  for (std::size_t i = 0; i < pixel_count; i += step) {
+    if (!o.flags.empty() && o.flags[i] != 0) continue;
+    const float lum = 0.3f * r[i] + 0.6f * g[i] + 0.1f * b[i];
+    if (std::isfinite(lum) && lum > 0.0f) values.push_back(lum);
+  }
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options) {
+  auto fail = [](const std::string& what) { throw std::invalid_argument("FitPrincipled: " + what); };
+  if (!options.Check()) fail("invalid FitOptions (see FitOptions::Check)");
+  const MetricGrid& grid = stack.grid;
+  if (grid.width <= 0 || grid.height <= 0 || !(grid.pitch_mm > 0.0)) fail("stack grid is empty or has no pitch");
+  auto check_image = [&](const Image& image, int channels, const char* name, bool optional) {
+    if (image.empty() && optional) return;
+    if (image.width() != grid.width || image.height() != grid.height || image.channels() != channels) {
+      fail(std::string(name) + " must be " + std::to_string(channels) + " channels on the stack grid (" +
+           std::to_string(grid.width) + " x " + std::to_string(grid.height) + ")");
+    }
+  };
+  check_image(geometry.normals, 3, "normals", false);
+  check_image(geometry.albedo, 3, "albedo", true);
+  check_image(geometry.height_mm, 1, "height_mm", true);
+  if (stack.observations.empty()) fail("stack has no observations");
+  for (std::size_t i = 0; i < stack.observations.size(); ++i) {
+    const Observation& o = stack.observations[i];
+    const std::string name = "observation " + std::to_string(i);
+    if (o.light < 0 || o.light >= static_cast<int>(stack.lights.size())) fail(name + ": light index out of range");
+    if (o.view < 0 || o.view >= static_cast<int>(stack.views.size())) fail(name + ": view index out of range");
+    check_image(o.rgb, 3, (name + " rgb").c_str(), false);
+    check_image(o.irradiance, 1, (name + " irradiance").c_str(), true);
+    if (!o.flags.empty() && o.flags.size() != o.rgb.pixel_count()) fail(name + ": flags must be empty or one per pixel");
+  }
+}
+
+// The usable observations of pixel `index` in its local frame; returns their number (at most
+// stack.observations.size(), the size `out` must have). Also the reflectance ratios (luminance /
+// (cos_l E)) into `ratios` when non-null.
+int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
+  const Stack& stack = *context.stack;
+  const SurfaceGeometry& geometry = *context.geometry;
+  const FitOptions& options = *context.options;
+  const int width = stack.grid.width;
+  const int col = static_cast<int>(index % width);
+  const int row = static_cast<int>(index / width);
+  Eigen::Vector3d n(geometry.normals.at(0, row, col), geometry.normals.at(1, row, col),
+                    geometry.normals.at(2, row, col));
+  const double length = n.norm();
+  if (!(length > kMinNormalLength && length < kMaxNormalLength)) return 0;
+  n /= length;
+  // Tangent: world +x projected into the tangent plane (the anisotropy direction); +y if n ~ x.
+  Eigen::Vector3d t = Eigen::Vector3d::UnitX() - n.x() * n;
+  if (t.squaredNorm() < 1e-6) t = Eigen::Vector3d::UnitY() - n.y() * n;
+  t.normalize();
+  const Eigen::Vector3d b = n.cross(t);
+  const double h = geometry.height_mm.empty() ? 0.0 : geometry.height_mm.at(0, row, col);
+  const Eigen::Vector3d point = stack.grid.PixelCentreInWorld(col, row, h);
+
+  int count = 0;
+  for (const ObservationInfo& info : context.observations) {
+    const Observation& o = *info.observation;
+    if (!o.flags.empty() && o.flags[index] != 0) continue;
+    const Eigen::Vector3d rgb(o.rgb.at(0, row, col), o.rgb.at(1, row, col), o.rgb.at(2, row, col));
+    if (!rgb.allFinite()) continue;
+    const Eigen::Vector3d l_world = info.light->DirectionFrom(point);
+    const Eigen::Vector3d v_world = (info.view->centre_in_world_mm - point).normalized();
+    const Eigen::Vector3d l(l_world.dot(t), l_world.dot(b), l_world.dot(n));
+    const Eigen::Vector3d v(v_world.dot(t), v_world.dot(b), v_world.dot(n));
+    if (l.z() < options.min_cos || v.z() < options.min_cos) continue;
+    const double e = o.irradiance.empty() ? info.light->RelativeIrradianceAt(point) : o.irradiance.at(0, row, col);
+    if (!(e > 0.0) || !std::isfinite(e)) continue;
+    LocalObservation& lo = out[count];
+    lo.light_local = l;
+    lo.view_local = v;
+    lo.irradiance = e;
+    lo.rgb = rgb;
+    const double floor = options.noise_floor * info.level;
+    for (int c = 0; c < 3; ++c) lo.weight(c) = 1.0 / (floor + options.noise_relative * std::abs(rgb(c)));
+    if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(rgb) / (l.z() * e));
+    ++count;
+  }
+  return count;
+}
+
+// Albedo of a pixel for clustering: the reconstruction's, else the per-channel median ratio.
+void PixelAlbedo(const FitContext& context, std::size_t index, const LocalObservation* obs, int count,
+                 float* scratch, float albedo[3]) {
+  const Image& image = context.geometry->albedo;
+  if (!image.empty()) {
+    const int width = context.stack->grid.width;
+    for (int c = 0; c < 3; ++c) albedo[c] = image.at(c, static_cast<int>(index / width), static_cast<int>(index % width));
+    return;
+  }
+  for (int c = 0; c < 3; ++c) {
+    for (int i = 0; i < count; ++i) scratch[i] = static_cast<float>(obs[i].rgb(c) / (obs[i].light_local.z() * obs[i].irradiance));
+    std::nth_element(scratch, scratch + count / 2, scratch + count);
+    albedo[c] = count > 0 ? scratch[count / 2] : 0.0f;
+  }
+}
+
+// Per-worker buffers, allocated once per chunk of pixels.
+struct PixelBuffers {
+  std::vector<LocalObservation> observations;
+  std::vector<float> ratios;
+  std::vector<float> scratch;
+  explicit PixelBuffers(std::size_t n) : observations(n), ratios(n), scratch(n) {}
+};
+
+// Gathers a pixel and computes its appearance features; returns the observation count.
+int PixelFeatures(const FitContext& context, std::size_t index, PixelBuffers& buffers, float* features) {
+  const int count = GatherPixel(context, index, buffers.observations.data(), buffers.ratios.data());
+  if (count < context.options->min_observations) return count;
+  float albedo[3];
+  PixelAlbedo(context, index, buffers.observations.data(), count, buffers.scratch.data(), albedo);
+  AppearanceFeatures(albedo, std::span<float>(buffers.ratios.data(), count), features);
+  return count;
+}
+
+ParameterMask Candidates(const FitOptions& options) {
+  ParameterMask m{};
+  m[kRoughness] = true;
+  m[kSpecular] = true;
+  m[kSpecularTint] = options.fit_specular_tint;
+  m[kSheen] = options.fit_sheen;
+  m[kSheenTint] = options.fit_sheen_tint;
+  m[kAnisotropic] = options.fit_anisotropic;
+  m[kMetallic] = options.fit_metallic;
+  return m;
+}
+
+// The sampled pixels of one cluster, in one owned buffer (Ceres references it while solving).
+struct ClusterSamples {
+  std::vector<LocalObservation> observations;
+  std::vector<std::size_t> offsets;  // pixel p: observations[offsets[p], offsets[p + 1])
+  std::vector<double> luminance_start;
+  std::size_t pixels() const { return offsets.empty() ? 0 : offsets.size() - 1; }
+  std::span<const LocalObservation> pixel(std::size_t p) const {
+    return {observations.data() + offsets[p], offsets[p + 1] - offsets[p]};
+  }
+};
+
+PixelCostSettings Settings(const FitOptions& options, const ParameterVector& params, const ParameterMask& free,
+                           double luminance_start) {
+  PixelCostSettings s;
+  s.loss = options.robust_loss;
+  s.luminance_start = std::max(kMinStartLuminance, luminance_start);
+  s.luminance_passes = LuminancePassesFor(params, free, options.luminance_passes);
+  return s;
+}
+
+// Cost over at most `pixel_limit` samples; `free` decides the luminance passes (see Settings).
+double SamplesCost(const ClusterSamples& samples, std::size_t pixel_limit, const ParameterVector& params,
+                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& free = {}) {
+  double cost = 0.0;
+  const std::size_t pixels = std::min(pixel_limit, samples.pixels());
+  for (std::size_t j = 0; j < pixels; ++j) {
+    const std::size_t p = j * samples.pixels() / pixels;  // evenly spread over the samples
+    const auto obs = samples.pixel(p);
+    residuals.resize(3 * obs.size());
+    cost += PixelResiduals(params, obs, Settings(options, params, free, samples.luminance_start[p]), residuals.data());
+  }
+  return cost;
+}
+
+struct SolveOutcome {
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  int iterations = 0;
+  bool converged = false;
+  bool usable = false;
+  std::string message;
+};
+
+// One Ceres solve of the shared parameters over the samples; `params` in and out.
+SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& free, const FitOptions& options,
+                          ParameterVector& params) {
+  SolveOutcome outcome;
+  ceres::Problem::Options problem_options;
+  ceres::Problem problem(problem_options);
+  ParameterVector x = params;
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    ceres::CostFunction* cost =
+        MakePixelCostFunction(samples.pixel(p), Settings(options, x, free, samples.luminance_start[p]));
+    problem.AddResidualBlock(cost, nullptr, &x[0], &x[1], &x[2], &x[3], &x[4], &x[5], &x[6]);
+  }
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    problem.SetParameterLowerBound(&x[i], 0, 0.0);
+    problem.SetParameterUpperBound(&x[i], 0, 1.0);
+    if (!free[i]) problem.SetParameterBlockConstant(&x[i]);
+  }
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  solver_options.num_threads = 1;  // clusters already run in parallel
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.parameter_tolerance = options.parameter_tolerance;
+  solver_options.gradient_tolerance = options.gradient_tolerance;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver_options, &problem, &summary);
+  outcome.initial_cost = summary.initial_cost;
+  outcome.final_cost = summary.final_cost;
+  outcome.iterations = static_cast<int>(summary.iterations.size());
+  outcome.message = summary.message;
+  bool finite = std::isfinite(summary.final_cost);
+  for (double v : x) finite = finite && std::isfinite(v);
+  outcome.converged = summary.termination_type == ceres::CONVERGENCE && finite;
+  outcome.usable = finite && summary.termination_type != ceres::FAILURE;
+  if (!finite) outcome.message = "non-finite parameters or cost: " + outcome.message;
+  if (outcome.usable) params = x;
+  return outcome;
+}
+
+// Fisher information J^T J (weighted-residual units) of the samples at `params`, and the cost.
+Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& params, const FitOptions& options,
+                          const ParameterMask& free, double* cost, int* residual_count) {
+  Matrix7 fisher = Matrix7::Zero();
+  *cost = 0.0;
+  *residual_count = 0;
+  Eigen::VectorXd r;
+  Eigen::MatrixXd j;
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    if (!EvaluatePixelJacobian(params, samples.pixel(p), Settings(options, params, free, samples.luminance_start[p]),
+                               &r, &j)) {
+      continue;
+    }
+    if (!r.allFinite() || !j.allFinite()) continue;
+    fisher.noalias() += j.transpose() * j;
+    *cost += 0.5 * r.squaredNorm();
+    *residual_count += static_cast<int>(r.size());
+  }
+  return fisher;
+}
+
+// The whole fit of one cluster: grid start, solve, observability, refit.
+ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options, double* observability_s) {
+  ClusterFit fit;
+  fit.id = id;
+  fit.sample_count = static_cast<int>(samples.pixels());
+  const ParameterMask candidates = Candidates(options);
+  ParameterVector params = DefaultParameters();
+  if (samples.pixels() == 0) {
+    fit.message = "no usable pixels";
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      fit.parameters[i] = {params[i], std::numeric_limits<double>::infinity(), false, "no usable pixels in the cluster"};
+    }
+    return fit;
+  }
+
+  // Coarse grid start (tints, anisotropy, metallic at 0: the model is linear in C there).
+  double max_grazing = 0.0;
+  for (const LocalObservation& o : samples.observations) max_grazing = std::max(max_grazing, GrazingWeight(o));
+  const bool sheen_grid = candidates[kSheen] && max_grazing > kSheenGridMinGrazing;
+  std::vector<double> residuals;
+  const std::size_t grid_pixels = static_cast<std::size_t>(options.grid_samples_per_cluster);
+  double best = std::numeric_limits<double>::infinity();
+  ParameterVector start = params;
+  start[kSpecularTint] = start[kSheenTint] = start[kAnisotropic] = start[kMetallic] = 0.0;
+  ParameterVector trial = start;
+  for (double r : kRoughnessGrid) {
+    for (double s : kSpecularGrid) {
+      for (double sh : kSheenGrid) {
+        if (!sheen_grid && sh != 0.0) continue;
+        trial[kRoughness] = r;
+        trial[kSpecular] = s;
+        trial[kSheen] = sh;
+        const double cost = SamplesCost(samples, grid_pixels, trial, options, residuals);
+        if (cost < best) {
+          best = cost;
+          start = trial;
+        }
+      }
+    }
+  }
+  params = start;
+
+  // Start luminance of each sample's base colour, from the grid start.
+  ParameterMask none{};
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    const Eigen::Vector3d c = SolveBaseColor(params, samples.pixel(p), Settings(options, params, none, 0.2));
+    samples.luminance_start[p] = std::max(kMinStartLuminance, Luminance(c));
+  }
+
+  ObservabilityContext context;
+  context.pixel_count = static_cast<int>(samples.pixels());
+  context.max_grazing_weight = max_grazing;
+  Matrix7 fisher;
+  // Fisher information (and the context's cost) at `p` with `free` deciding the colour passes.
+  auto update_fisher = [&](const ParameterVector& p, const ParameterMask& free) {
+    const auto t_obs = Clock::now();
+    double cost = 0.0;
+    int residual_count = 0;
+    fisher = FisherInformation(samples, p, options, free, &cost, &residual_count);
+    context.cost = cost;
+    context.residual_count = residual_count;
+    *observability_s += Seconds(t_obs);
+  };
+  // The leave-out rule over `free`, then: keep a left-out parameter whose default the data exclude.
+  auto decide = [&](const ParameterVector& p, const ParameterMask& free) {
+    update_fisher(p, free);
+    const auto t_obs = Clock::now();
+    ObservabilityDecision d = DecideObservability(fisher, free, context, options.observability);
+    const double cost_at_fit = SamplesCost(samples, samples.pixels(), p, options, residuals, free);
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!free[i] || d.measured[i]) continue;
+      ParameterVector trial_default = p;
+      trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
+      const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, free);
+      const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
+      if (chi2 > options.observability.default_rejection_chi2) {
+        d.measured[i] = true;
+        char buffer[200];
+        std::snprintf(buffer, sizeof buffer,
+                      "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
+                      "(chi^2 +%.3g): kept at the fitted value",
+                      d.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
+        d.reason[i] = buffer;
+      }
+    }
+    *observability_s += Seconds(t_obs);
+    return d;
+  };
+  // Left-out parameters to their defaults and a refit without them; returns the solve's outcome.
+  auto refit_without_left_out = [&](ParameterVector& p, const ParameterMask& measured) {
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!measured[i]) p[i] = FitParameterDefault(static_cast<FitParameter>(i));
+    }
+    const ParameterVector before = p;
+    SolveOutcome o = SolveCluster(samples, measured, options, p);
+    if (!o.usable) {
+      LogError() << "fitting: cluster " << id << " refit failed (" << o.message << ")";
+      p = before;
+      o.converged = false;
+      o.message = "refit failed: " + o.message;
+      return o;
+    }
+    return o;
+  };
+
+  // First solve with every candidate free.
+  SolveOutcome outcome = SolveCluster(samples, candidates, options, params);
+  if (!outcome.usable) {
+    LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
+    params = start;
+  }
+  const SolveOutcome first = outcome;
+  int iterations = first.iterations;
+
+  // Observability at the solution, then a refit with the left-out parameters at their defaults.
+  ObservabilityDecision decision = decide(params, candidates);
+  if (decision.measured != candidates) {
+    outcome = refit_without_left_out(params, decision.measured);
+    iterations += outcome.iterations;
+    update_fisher(params, decision.measured);
+  }
+
+  // Relative RMS residual (unweighted) and mean base colour over the samples.
+  auto summarise = [&](const ParameterVector& p, const ParameterMask& free, Eigen::Vector3d* mean_color) {
+    Eigen::Vector3d color_sum = Eigen::Vector3d::Zero();
+    double err2 = 0.0, data2 = 0.0;
+    for (std::size_t i = 0; i < samples.pixels(); ++i) {
+      const auto obs = samples.pixel(i);
+      const Eigen::Vector3d c = SolveBaseColor(p, obs, Settings(options, p, free, samples.luminance_start[i]));
+      color_sum += c;
+      for (const LocalObservation& o : obs) {
+        err2 += (RenderLocal(p, c, o.light_local, o.view_local, o.irradiance) - o.rgb).squaredNorm();
+        data2 += o.rgb.squaredNorm();
+      }
+    }
+    if (mean_color != nullptr) *mean_color = color_sum / static_cast<double>(samples.pixels());
+    return data2 > 0.0 ? std::sqrt(err2 / data2) : 0.0;
+  };
+  fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+
+  // Metallic only when the data demand it: a poorly explained cluster is refitted with metallic
+  // free; that fit replaces the dielectric one if it explains the data (relative RMS residual
+  // within mismatch_relative_rms), chi^2 drops by more than default_rejection_chi2 and metallic is
+  // then measured. Observability is decided again for the new model.
+  const int metal = kMetallic;
+  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > options.mismatch_relative_rms) {
+    ParameterMask free = decision.measured;
+    free[metal] = true;
+    ParameterVector trial = params;
+    trial[metal] = kMetallicStart;
+    SolveOutcome metal_outcome = SolveCluster(samples, free, options, trial);
+    if (metal_outcome.usable) {
+      const double cost_now = SamplesCost(samples, samples.pixels(), params, options, residuals, decision.measured);
+      const double cost_metal = SamplesCost(samples, samples.pixels(), trial, options, residuals, free);
+      const ObservabilityContext dielectric_context = context;
+      const Matrix7 dielectric_fisher = fisher;
+      ObservabilityDecision metal_decision = decide(trial, free);
+      const double gain = EffectiveChi2Increase(cost_metal, cost_now, context, options.observability);
+      // Demanded = the metallic model explains the data (not merely a better misfit).
+      const bool explains = summarise(trial, free, nullptr) <= options.mismatch_relative_rms;
+      if (explains && gain > options.observability.default_rejection_chi2 && metal_decision.measured[metal]) {
+        params = trial;
+        iterations += metal_outcome.iterations;
+        if (metal_decision.measured != free) {
+          metal_outcome = refit_without_left_out(params, metal_decision.measured);
+          iterations += metal_outcome.iterations;
+          update_fisher(params, metal_decision.measured);
+        }
+        char buffer[160];
+        std::snprintf(buffer, sizeof buffer, "demanded by the data: chi^2 -%.3g with metallic free", gain);
+        metal_decision.reason[metal] = buffer;
+        decision = metal_decision;
+        outcome = metal_outcome;
+        fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+      } else {
+        context = dielectric_context;  // keep the dielectric fit's figures
+        fisher = dielectric_fisher;
+      }
+    }
+  }
+
+  const ParameterVector std_dev = PosteriorStdDev(fisher, decision.measured, context, options.observability);
+  fit.initial_cost = first.initial_cost;
+  fit.final_cost = outcome.final_cost;
+  fit.iterations = iterations;
+  fit.converged = outcome.converged;  // the final solve is what counts
+  fit.message = outcome.message;
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    ParameterEstimate& e = fit.parameters[i];
+    e.value = params[i];
+    e.measured = decision.measured[i];
+    e.std_dev = e.measured ? std_dev[i] : std::numeric_limits<double>::infinity();
+    e.reason = decision.reason[i];  // for a measured parameter only a "weakly constrained" / "demanded" note
+  }
+  return fit;
+}
+
+// Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
+// cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
+// residual buffers come from the caller. Returns which parameters were kept.
+// `color` receives the closed-form base colour at the returned parameters (saves a solve).
+int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
+                double luminance_start, const ParameterVector& cluster, ParameterVector& params,
+                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color) {
+  int index[kMaxPixelParameters];
+  int k = 0;
+  if (measured[kRoughness]) index[k++] = kRoughness;
+  if (measured[kSpecular] && options.refine_specular_per_pixel) index[k++] = kSpecular;
+  const PixelCostSettings settings = Settings(options, cluster, measured, luminance_start);
+  if (k == 0) {
+    *color = SolveBaseColor(params, obs, settings);
+    return 0;
+  }
+  const std::size_t m = 3 * obs.size();
+  r0.resize(m);
+  r1.resize(m);
+  jac.resize(m * k);
+  const double prior_w = 1.0 / (options.pixel_prior_std * options.pixel_prior_std);
+  auto total = [&](const ParameterVector& p, std::vector<double>& r, Eigen::Vector3d* c_out) {
+    double c = PixelResiduals(p, obs, settings, r.data(), c_out);
+    for (int a = 0; a < k; ++a) c += 0.5 * prior_w * (p[index[a]] - cluster[index[a]]) * (p[index[a]] - cluster[index[a]]);
+    return c;
+  };
+  // Fixed-size normal equations (no allocation per pixel); unused rows are identity.
+  using Matrix2 = Eigen::Matrix<double, kMaxPixelParameters, kMaxPixelParameters>;
+  using Vector2 = Eigen::Matrix<double, kMaxPixelParameters, 1>;
+  Matrix2 h = Matrix2::Identity();
+  double cost = total(params, r0, color);
+  const ParameterVector start = params;
+  const Eigen::Vector3d start_color = *color;
+  for (int it = 0; it < options.pixel_iterations; ++it) {
+    for (int a = 0; a < k; ++a) {
+      ParameterVector q = params;
+      const double step = q[index[a]] + kPixelStep <= 1.0 ? kPixelStep : -kPixelStep;
+      q[index[a]] += step;
+      PixelResiduals(q, obs, settings, r1.data());
+      for (std::size_t i = 0; i < m; ++i) jac[a * m + i] = (r1[i] - r0[i]) / step;
+    }
+    h.setIdentity();
+    Vector2 g = Vector2::Zero();
+    for (int a = 0; a < k; ++a) {
+      for (int b = 0; b <= a; ++b) {
+        double s = 0.0;
+        for (std::size_t i = 0; i < m; ++i) s += jac[a * m + i] * jac[b * m + i];
+        h(a, b) = h(b, a) = s;
+      }
+      double s = 0.0;
+      for (std::size_t i = 0; i < m; ++i) s += jac[a * m + i] * r0[i];
+      g(a) = s + prior_w * (params[index[a]] - cluster[index[a]]);
+      h(a, a) += prior_w;
+    }
+    // No step where even the best case cannot pin the value down (cheap stage: skip early).
+    const Matrix2 covariance = h.inverse();
+    bool supported = false;
+    for (int a = 0; a < k; ++a) supported = supported || std::sqrt(std::max(0.0, covariance(a, a))) < options.pixel_max_std;
+    if (!supported) break;
+    const Vector2 delta = -h.ldlt().solve(g);
+    if (!delta.allFinite()) break;
+    // Step halving keeps the damped step a descent step.
+    bool accepted = false;
+    for (double scale = 1.0; scale > kMinStepScale && !accepted; scale *= 0.5) {
+      ParameterVector q = params;
+      for (int a = 0; a < k; ++a) q[index[a]] = std::clamp(q[index[a]] + scale * delta(a), 0.0, 1.0);
+      Eigen::Vector3d c_color;
+      const double c = total(q, r1, &c_color);
+      if (c < cost) {
+        *color = c_color;
+        params = q;
+        cost = c;
+        std::swap(r0, r1);
+        accepted = true;
+      }
+    }
+    if (!accepted) break;
+  }
+  // Keep a refined value only where the pixel's own data pins it down.
+  const Matrix2 covariance = h.inverse();  // h of the last linearisation (identity rows unused)
+  int kept = 0;
+  for (int a = 0; a < k; ++a) {
+    const double sd = std::sqrt(std::max(0.0, covariance(a, a)));
+    if (std::isfinite(sd) && sd < options.pixel_max_std) {
+      ++kept;
+    } else {
+      params[index[a]] = cluster[index[a]];
+    }
+  }
+  if (kept < k && params != start) {
+    *color = SolveBaseColor(params, obs, settings);  // a partial revert changes the colour
+  } else if (params == start) {
+    *color = start_color;
+  }
+  return kept;
+}
+
+std::string JsonNumber(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.6g", v);
+  return buffer;
+}
+
+std::string JsonString(const std::string& s) {
+  std::string out = "\"";
+  for (const char ch : s) {
+    switch (ch) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\t': out += "\\t"; break;
+      case '\r': out += "\\r"; break;
+      default:
+        if (static_cast<unsigned char>(ch) < 0x20) {
+          char buffer[8];
+          std::snprintf(buffer, sizeof buffer, "\\u%04x", ch);
+          out += buffer;
+        } else {
+          out += ch;
+        }
+    }
+  }
+  return out + "\"";
+}
+
+}  // namespace
+
+bool FitOptions::Check() const {
+  return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
+         noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
+         min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
+         mismatch_relative_rms > 0.0 && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
+         pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0;
+}
+
+FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                        const ProgressCallback& progress) {
+  const auto t_start = Clock::now();
+  ValidateInputs(stack, geometry, options);
+  FitResult result;
+  const MetricGrid& grid = stack.grid;
+  const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
+
+  FitContext context;
+  context.stack = &stack;
+  context.geometry = &geometry;
+  context.options = &options;
+  for (const Observation& o : stack.observations) {
+    ObservationInfo info;
+    info.observation = &o;
+    info.light = &stack.lights[o.light];
+    info.view = &stack.views[o.view];
+    info.level = MedianLuminance(o, pixel_count);
+    context.observations.push_back(info);
+  }
+  const std::size_t n_obs = stack.observations.size();
+
+  // 1. Gather: features of an evenly strided candidate set of pixels.
+  auto t = Clock::now();
+  ReportProgress(progress, "fit: gather", 0.0);
+  const std::size_t candidate_count = std::min<std::size_t>(pixel_count, options.clustering.max_samples);
+  std::vector<std::size_t> candidates(candidate_count);
+  for (std::size_t i = 0; i < candidate_count; ++i) candidates[i] = i * pixel_count / candidate_count;
+  std::vector<float> features(candidate_count * kAppearanceFeatureCount);
+  std::vector<std::uint8_t> valid(candidate_count, 0);
+  ParallelFor(candidate_count, [&](std::size_t begin, std::size_t end) {
+    PixelBuffers buffers(n_obs);
+    for (std::size_t i = begin; i < end; ++i) {
+      const int count = PixelFeatures(context, candidates[i], buffers, &features[i * kAppearanceFeatureCount]);
+      valid[i] = count >= options.min_observations ? 1 : 0;
+    }
+  });
+  result.times.gather_s = Seconds(t);
+
+  // 2. Clustering of the candidates.
+  t = Clock::now();
+  ReportProgress(progress, "fit: clustering", 0.0);
+  const Clustering clustering = ClusterPixels(features, kAppearanceFeatureCount, valid, options.clustering);
+  result.times.clustering_s = Seconds(t);
+  const int k = clustering.cluster_count;
+  if (k == 0) throw std::invalid_argument("FitPrincipled: no pixel has enough usable observations");
+
+  // 3. Cluster fits on evenly spread samples of each cluster's candidates, clusters in parallel.
+  t = Clock::now();
+  std::vector<std::vector<std::size_t>> members(k);
+  for (std::size_t i = 0; i < candidate_count; ++i) {
+    if (clustering.labels[i] >= 0) members[clustering.labels[i]].push_back(candidates[i]);
+  }
+  std::vector<ClusterSamples> samples(k);
+  result.clusters.resize(k);
+  std::vector<double> observability_s(k, 0.0);
+  std::atomic<int> done{0};
+  std::mutex progress_mutex;
+  ParallelFor(static_cast<std::size_t>(k), [&](std::size_t begin, std::size_t end) {
+    std::vector<LocalObservation> buffer(n_obs);
+    for (std::size_t c = begin; c < end; ++c) {
+      const std::vector<std::size_t>& m = members[c];
+      const std::size_t take = std::min<std::size_t>(m.size(), options.samples_per_cluster);
+      ClusterSamples& s = samples[c];
+      s.offsets.push_back(0);
+      for (std::size_t j = 0; j < take; ++j) {
+        const int count = GatherPixel(context, m[j * m.size() / take], buffer.data(), nullptr);
+        if (count < options.min_observations) continue;
+        s.observations.insert(s.observations.end(), buffer.begin(), buffer.begin() + count);
+        s.offsets.push_back(s.observations.size());
+        s.luminance_start.push_back(0.2);
+      }
+      result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
+      std::lock_guard lock(progress_mutex);
+      ReportProgress(progress, "fit: clusters", static_cast<double>(++done) / k);
+    }
+  });
+  result.times.cluster_fit_s = Seconds(t);
+  for (double s : observability_s) result.times.observability_s += s;
+  for (const ClusterFit& c : result.clusters) {
+    if (!c.converged) {
+      result.convergence.all_converged = false;
+      ++result.convergence.clusters_failed;
+      result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
+      LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
+    }
+    if (c.rms_relative_residual > options.mismatch_relative_rms) {
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
+                    "not explain these pixels; expect biased parameters)",
+                    c.id, c.rms_relative_residual, options.mismatch_relative_rms);
+      result.convergence.messages.push_back(buffer);
+      LogWarning() << "fitting: " << buffer;
+    }
+  }
+
+  // Which maps exist: a parameter measured in at least one cluster (elsewhere it holds its default).
+  std::array<bool, kFitParameterCount> measured_any{};
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    for (const ClusterFit& c : result.clusters) measured_any[i] = measured_any[i] || c.parameters[i].measured;
+  }
+  std::vector<ParameterVector> cluster_params(k);
+  std::vector<ParameterMask> cluster_measured(k);
+  std::vector<double> cluster_luminance(k);
+  for (int c = 0; c < k; ++c) {
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      const ParameterEstimate& e = result.clusters[c].parameters[i];
+      cluster_params[c][i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+      cluster_measured[c][i] = e.measured;
+    }
+    cluster_luminance[c] = std::max(kMinStartLuminance, Luminance(result.clusters[c].mean_base_color));
+  }
+
+  // 5. Per pixel: label, closed-form base colour, refinement where the data supports it.
+  t = Clock::now();
+  ReportProgress(progress, "fit: pixels", 0.0);
+  result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
+  result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    result.parameter_maps[i] =
+        Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
+  }
+  std::atomic<std::int64_t> fitted{0}, refined{0};
+  std::vector<std::int64_t> cluster_pixels(k, 0);
+  std::mutex count_mutex;
+  const double gloss_threshold = -std::log(1.0 - options.pixel_min_specular_fraction);
+  ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
+    PixelBuffers buffers(n_obs);
+    std::vector<double> r0, r1, jac;
+    r0.reserve(3 * n_obs);
+    r1.reserve(3 * n_obs);
+    jac.reserve(3 * n_obs * kMaxPixelParameters);
+    std::vector<std::int64_t> local_pixels(k, 0);
+    std::int64_t local_fitted = 0, local_refined = 0;
+    float feature[kAppearanceFeatureCount];
+    for (std::size_t row = row_begin; row < row_end; ++row) {
+      for (int col = 0; col < grid.width; ++col) {
+        const std::size_t index = row * grid.width + col;
+        const int count = PixelFeatures(context, index, buffers, feature);
+        if (count < options.min_observations) {
+          if (!geometry.albedo.empty()) {
+            for (int ch = 0; ch < 3; ++ch) {
+              result.base_color.at(ch, row, col) = std::clamp(geometry.albedo.at(ch, row, col), 0.0f, 1.0f);
+            }
+          }
+          continue;
+        }
+        const int c = NearestCluster(clustering, feature, kAppearanceFeatureCount, options.clustering);
+        ++local_pixels[c];
+        ++local_fitted;
+        const std::span<const LocalObservation> obs(buffers.observations.data(), count);
+        ParameterVector params = cluster_params[c];
+        Eigen::Vector3d color;
+        if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
+            count >= 2 * kMaxPixelParameters) {
+          if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
+                          jac, &color) > 0) {
+            ++local_refined;
+          }
+        } else {
+          color = SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
+        }
+        for (int ch = 0; ch < 3; ++ch) {
+          const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
+          result.base_color.at(ch, row, col) = static_cast<float>(v);
+        }
+        for (int i = 0; i < kFitParameterCount; ++i) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+        result.cluster_id.at(0, row, col) = static_cast<float>(c);
+      }
+    }
+    fitted += local_fitted;
+    refined += local_refined;
+    std::lock_guard lock(count_mutex);
+    for (int c = 0; c < k; ++c) cluster_pixels[c] += local_pixels[c];
+  });
+  for (int c = 0; c < k; ++c) result.clusters[c].pixel_count = cluster_pixels[c];
+  result.convergence.pixels_fitted = fitted;
+  result.convergence.pixels_refined = refined;
+  result.times.per_pixel_s = Seconds(t);
+
+  // Map decisions: left out, constant, or texture.
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    MapReport& report = result.maps[i];
+    const FitParameter p = static_cast<FitParameter>(i);
+    if (!measured_any[i]) {
+      report.measured = false;
+      report.value = FitParameterDefault(p);
+      // The reason of the largest cluster speaks for the capture.
+      int largest = 0;
+      for (int c = 1; c < k; ++c) {
+        if (result.clusters[c].pixel_count > result.clusters[largest].pixel_count) largest = c;
+      }
+      report.reason = "not measured: " + result.clusters[largest].parameters[i].reason;
+      result.parameter_maps[i] = Image();
+      continue;
+    }
+    report.measured = true;
+    double sum = 0.0, sum2 = 0.0, pooled = 0.0;
+    std::int64_t n = 0, n_pooled = 0;
+    const auto plane = result.parameter_maps[i].plane(0);
+    const auto ids = result.cluster_id.plane(0);
+    for (std::size_t j = 0; j < pixel_count; ++j) {
+      if (ids[j] < 0.0f) continue;
+      sum += plane[j];
+      sum2 += static_cast<double>(plane[j]) * plane[j];
+      ++n;
+    }
+    for (int c = 0; c < k; ++c) {
+      const ParameterEstimate& e = result.clusters[c].parameters[i];
+      if (e.measured && std::isfinite(e.std_dev)) {
+        pooled += e.std_dev * e.std_dev * result.clusters[c].pixel_count;
+        n_pooled += result.clusters[c].pixel_count;
+      }
+    }
+    const double mean = n > 0 ? sum / n : FitParameterDefault(p);
+    report.value = mean;
+    report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
+    const double pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
+    if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
+      report.constant = true;
+      char buffer[160];
+      std::snprintf(buffer, sizeof buffer, "uniform within noise (spread %.3g, pooled uncertainty %.3g)", report.spread,
+                    pooled_std);
+      report.reason = buffer;
+      auto out = result.parameter_maps[i].plane(0);
+      for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);
+    }
+  }
+  result.times.total_s = Seconds(t_start);
+  ReportProgress(progress, "fit: pixels", 1.0);
+  LogInfo() << "fitting: " << k << " clusters, " << result.convergence.pixels_fitted << " pixels ("
+            << result.convergence.pixels_refined << " refined) in " << result.times.total_s << " s";
+  return result;
+}
+
+Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
+                   const Observation& observation) {
+  const MetricGrid& grid = stack.grid;
+  if (result.base_color.width() != grid.width || result.base_color.height() != grid.height) {
+    throw std::invalid_argument("RenderFitted: result and stack grids differ");
+  }
+  if (observation.light < 0 || observation.light >= static_cast<int>(stack.lights.size()) || observation.view < 0 ||
+      observation.view >= static_cast<int>(stack.views.size())) {
+    throw std::invalid_argument("RenderFitted: observation light or view out of range");
+  }
+  Image out(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
+  const LightModel& light = stack.lights[observation.light];
+  const ViewGeometry& view = stack.views[observation.view];
+  ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
+    for (std::size_t row = row_begin; row < row_end; ++row) {
+      for (int col = 0; col < grid.width; ++col) {
+        if (result.cluster_id.at(0, row, col) < 0.0f) continue;
+        Eigen::Vector3d n(geometry.normals.at(0, row, col), geometry.normals.at(1, row, col),
+                          geometry.normals.at(2, row, col));
+        n.normalize();
+        Eigen::Vector3d t = Eigen::Vector3d::UnitX() - n.x() * n;
+        if (t.squaredNorm() < 1e-6) t = Eigen::Vector3d::UnitY() - n.y() * n;
+        t.normalize();
+        const Eigen::Vector3d b = n.cross(t);
+        const double h = geometry.height_mm.empty() ? 0.0 : geometry.height_mm.at(0, row, col);
+        const Eigen::Vector3d point = grid.PixelCentreInWorld(col, static_cast<int>(row), h);
+        const Eigen::Vector3d lw = light.DirectionFrom(point);
+        const Eigen::Vector3d vw = (view.centre_in_world_mm - point).normalized();
+        const double e =
+            observation.irradiance.empty() ? light.RelativeIrradianceAt(point) : observation.irradiance.at(0, row, col);
+        ParameterVector params;
+        for (int i = 0; i < kFitParameterCount; ++i) {
+          params[i] = result.parameter_maps[i].empty() ? result.maps[i].value : result.parameter_maps[i].at(0, row, col);
+        }
+        const Eigen::Vector3d c(result.base_color.at(0, row, col), result.base_color.at(1, row, col),
+                                result.base_color.at(2, row, col));
+        const Eigen::Vector3d rgb = RenderLocal(params, c, Eigen::Vector3d(lw.dot(t), lw.dot(b), lw.dot(n)),
+                                                Eigen::Vector3d(vw.dot(t), vw.dot(b), vw.dot(n)), e);
+        for (int ch = 0; ch < 3; ++ch) out.at(ch, row, col) = static_cast<float>(rgb(ch));
+      }
+    }
+  });
+  return out;
+}
+
+std::string FitResultToJson(const FitResult& result) {
+  std::ostringstream j;
+  j << "{\n  \"maps\": {";
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    const MapReport& m = result.maps[i];
+    j << (i ? "," : "") << "\n    " << JsonString(FitParameterName(i)) << ": {\"measured\": "
+      << (m.measured ? "true" : "false") << ", \"constant\": " << (m.constant ? "true" : "false")
+      << ", \"texture\": " << (m.measured && !m.constant ? "true" : "false") << ", \"value\": " << JsonNumber(m.value)
+      << ", \"spread\": " << JsonNumber(m.spread) << ", \"reason\": " << JsonString(m.reason) << "}";
+  }
+  j << "\n  },\n  \"not_measured\": [";
+  bool first = true;
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    if (result.maps[i].measured) continue;
+    j << (first ? "" : ",") << "\n    {\"parameter\": " << JsonString(FitParameterName(i))
+      << ", \"written_as\": " << JsonNumber(result.maps[i].value) << ", \"reason\": " << JsonString(result.maps[i].reason)
+      << "}";
+    first = false;
+  }
+  j << (first ? "" : "\n  ") << "],\n  \"clusters\": [";
+  for (std::size_t c = 0; c < result.clusters.size(); ++c) {
+    const ClusterFit& f = result.clusters[c];
+    j << (c ? "," : "") << "\n    {\"id\": " << f.id << ", \"pixels\": " << f.pixel_count
+      << ", \"samples\": " << f.sample_count << ", \"converged\": " << (f.converged ? "true" : "false")
+      << ", \"iterations\": " << f.iterations << ", \"initial_cost\": " << JsonNumber(f.initial_cost)
+      << ", \"final_cost\": " << JsonNumber(f.final_cost)
+      << ", \"rms_relative_residual\": " << JsonNumber(f.rms_relative_residual) << ", \"mean_base_color_linear\": ["
+      << JsonNumber(f.mean_base_color(0)) << ", " << JsonNumber(f.mean_base_color(1)) << ", "
+      << JsonNumber(f.mean_base_color(2)) << "], \"message\": " << JsonString(f.message) << ",\n     \"parameters\": {";
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      const ParameterEstimate& e = f.parameters[i];
+      j << (i ? ", " : "") << "\n       " << JsonString(FitParameterName(i)) << ": {\"value\": " << JsonNumber(e.value)
+        << ", \"std\": " << JsonNumber(e.std_dev) << ", \"measured\": " << (e.measured ? "true" : "false")
+        << ", \"reason\": " << JsonString(e.reason) << "}";
+    }
+    j << "}}";
+  }
+  const ConvergenceReport& cr = result.convergence;
+  j << "\n  ],\n  \"convergence\": {\"all_converged\": " << (cr.all_converged ? "true" : "false")
+    << ", \"clusters_failed\": " << cr.clusters_failed << ", \"pixels_fitted\": " << cr.pixels_fitted
+    << ", \"pixels_refined\": " << cr.pixels_refined << ", \"messages\": [";
+  for (std::size_t i = 0; i < cr.messages.size(); ++i) j << (i ? ", " : "") << JsonString(cr.messages[i]);
+  const StageTimes& t = result.times;
+  j << "]},\n  \"times_s\": {\"gather\": " << JsonNumber(t.gather_s) << ", \"clustering\": " << JsonNumber(t.clustering_s)
+    << ", \"cluster_fit\": " << JsonNumber(t.cluster_fit_s) << ", \"observability\": " << JsonNumber(t.observability_s)
+    << ", \"per_pixel\": " << JsonNumber(t.per_pixel_s) << ", \"total\": " << JsonNumber(t.total_s) << "}\n}\n";
+  return j.str();
+}
+
+}  // namespace u3mscan::fitting

@@ -1,0 +1,176 @@
+#pragma once
+// Fitting the Principled parameters of a fabric from a calibrated Stack (core/stack.h) and the
+// reconstruction's per-pixel normals, albedo and height. Algorithm and figures: docs/fitting.md.
+//
+// Stages (each timed):
+//   1. gather:        per pixel, the usable observations in its local shading frame (z = normal,
+//                     x = world +x projected into the tangent plane) and its appearance features;
+//   2. clustering:    k-means on albedo and gloss profile (fitting/clustering.h);
+//   3. cluster fit:   per cluster, the shared parameters (roughness, specular, tints, sheen,
+//                     anisotropic, optionally metallic) on a deterministic sample of its pixels,
+//                     base colour per pixel in closed form; coarse grid start, then Ceres
+//                     (Levenberg-Marquardt, bounds [0, 1]); clusters run in parallel;
+//   4. observability: parameters the capture does not constrain are left out (U3M default, no
+//                     texture) and the cluster refitted without them (fitting/observability.h);
+//   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
+//                     enough information, roughness (optionally specular) is refined by a damped
+//                     Gauss-Newton step regularised toward the cluster value. No Ceres problem per
+//                     pixel, no allocation per pixel.
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "core/progress.h"
+#include "core/stack.h"
+#include "fitting/brdf_cost.h"
+#include "fitting/clustering.h"
+#include "fitting/observability.h"
+
+namespace u3mscan::fitting {
+
+struct FitOptions {
+  ClusteringOptions clustering;
+  ObservabilityOptions observability;
+
+  // Pixels per cluster the shared parameters are fitted on (evenly spread over the cluster).
+  int samples_per_cluster = 192;
+  // Pixels per cluster the coarse start grid is evaluated on (a subset of the samples).
+  int grid_samples_per_cluster = 48;
+  // Noise model of one channel of one observation, sigma = noise_floor * level + noise_relative * |rgb|,
+  // level = median luminance of that observation image (so the floor follows the light's brightness).
+  double noise_relative = 0.01;
+  double noise_floor = 0.005;
+  RobustLoss robust_loss;
+  // Observations with cos_l or cos_v below this are not used (grazing to the point of shadowing).
+  double min_cos = 0.02;
+  // Pixels with fewer usable observations are not fitted (their maps hold the cluster / defaults).
+  int min_observations = 4;
+  // Which parameters the fit may estimate; the others stay at their U3M defaults. Metallic is off:
+  // fabric is a dielectric, and "metallic" would trade off against specular and base colour.
+  bool fit_specular_tint = true;
+  bool fit_sheen = true;
+  bool fit_sheen_tint = true;
+  bool fit_anisotropic = true;
+  bool fit_metallic = false;
+  // With fit_metallic off, a cluster the model explains poorly (mismatch_relative_rms) is refitted
+  // with metallic free, and metallic is kept only if the metallic model then explains the data
+  // (see docs/fitting.md).
+  bool metallic_if_demanded = true;
+  // Ceres.
+  int max_iterations = 100;
+  double function_tolerance = 1e-8;
+  double parameter_tolerance = 1e-10;
+  double gradient_tolerance = 1e-12;
+  // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
+  int luminance_passes = 4;
+  // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
+  // the convergence messages (the Principled model does not explain its data).
+  double mismatch_relative_rms = 0.05;
+  // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
+  // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
+  // Gauss-Newton iteration, 2 more with specular.
+  bool refine_per_pixel = true;
+  bool refine_specular_per_pixel = false;
+  double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
+  double pixel_max_std = 0.05;       // a pixel's value is kept only if its posterior std is below this
+  // Screen: a pixel is refined only if its largest reflectance ratio exceeds its median one by
+  // 1 / (1 - this), i.e. it shows a highlight of at least this share.
+  double pixel_min_specular_fraction = 0.1;
+  int pixel_iterations = 1;
+  // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
+
+  bool Check() const;
+};
+
+// One shared parameter of one cluster.
+struct ParameterEstimate {
+  double value = 0.0;
+  double std_dev = 0.0;  // posterior standard deviation; inf when not measured
+  bool measured = false;
+  std::string reason;    // why it was left out; for a measured one only a "weakly constrained" note
+};
+
+struct ClusterFit {
+  int id = 0;
+  std::int64_t pixel_count = 0;
+  int sample_count = 0;
+  std::array<ParameterEstimate, kFitParameterCount> parameters;
+  Eigen::Vector3d mean_base_color = Eigen::Vector3d::Zero();  // linear RGB over the samples
+  double initial_cost = 0.0;         // Ceres cost at the grid start
+  double final_cost = 0.0;           // Ceres cost at the solution
+  double rms_relative_residual = 0;  // RMS of (prediction - data) / data over sampled observations
+  int iterations = 0;
+  bool converged = false;
+  std::string message;               // Ceres termination / failure text
+};
+
+// One output map as the U3M writer should treat it.
+struct MapReport {
+  bool measured = false;   // false: write the U3M default, no texture
+  bool constant = false;   // measured but uniform within noise: write `value`, no texture
+  double value = 0.0;      // default (not measured), constant, or pixel mean (texture)
+  double spread = 0.0;     // standard deviation over fitted pixels
+  std::string reason;      // why not measured / why constant
+};
+
+struct StageTimes {
+  double gather_s = 0.0;
+  double clustering_s = 0.0;
+  double cluster_fit_s = 0.0;
+  double observability_s = 0.0;  // included in cluster_fit_s (refits), reported separately
+  double per_pixel_s = 0.0;
+  double total_s = 0.0;
+};
+
+struct ConvergenceReport {
+  bool all_converged = true;
+  int clusters_failed = 0;              // not converged or numerically failed
+  std::vector<std::string> messages;    // one line per problem or mismatch warning, empty when all is well
+  std::int64_t pixels_fitted = 0;       // pixels with enough observations
+  std::int64_t pixels_refined = 0;      // pixels whose own roughness / specular were kept
+};
+
+struct FitResult {
+  // Per-pixel maps on the stack's grid (pitch_mm set). base_color is 3 channels, linear RGB,
+  // clamped to [0, 1]. A scalar map whose parameter was not measured is EMPTY (maps[i].measured is
+  // false, write the U3M default); a constant map is filled with its value.
+  Image base_color;
+  std::array<Image, kFitParameterCount> parameter_maps;  // index = FitParameter
+  Image cluster_id;  // 1 channel, cluster index, -1 for pixels without enough observations
+  std::array<MapReport, kFitParameterCount> maps;
+  std::vector<ClusterFit> clusters;
+  ConvergenceReport convergence;
+  StageTimes times;
+
+  const Image& map(FitParameter p) const { return parameter_maps[static_cast<int>(p)]; }
+  const MapReport& report(FitParameter p) const { return maps[static_cast<int>(p)]; }
+};
+
+// The geometry the fit needs beside the Stack (from the reconstruction): normals (3 channels, unit,
+// world frame), albedo (3 channels, linear RGB, any scale; empty: estimated from the data) and
+// height_mm (1 channel; empty: the sample plane z = 0). All on the stack's grid.
+struct SurfaceGeometry {
+  Image normals;
+  Image albedo;
+  Image height_mm;
+};
+
+// Fits the maps. Throws std::invalid_argument when the inputs do not match (sizes, indices,
+// options); never returns NaN: a cluster whose solve fails keeps its grid start, flagged in
+// `convergence`.
+FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                        const ProgressCallback& progress = {});
+
+// Renders observation `observation_index` of `stack` (its light, view, irradiance and grid; its rgb
+// is ignored) with the fitted maps, for held-out checks: 3-channel linear RGB in the Stack's units.
+Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
+                   const Observation& observation);
+
+// The fit report as JSON text (for fit.json): per-cluster parameters with uncertainties, the map
+// decisions (measured / constant / left out and why), convergence, times per stage.
+std::string FitResultToJson(const FitResult& result);
+
+}  // namespace u3mscan::fitting

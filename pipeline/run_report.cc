@@ -1,0 +1,61 @@
+#include "pipeline/run_report.h"
+
+#include <fstream>
+#include <system_error>
+
+#include "core/error.h"
+
+namespace u3mscan {
+
+const char* ParameterSourceName(ParameterSource source) {
+  switch (source) {
+    case ParameterSource::kMeasured: return "measured";
+    case ParameterSource::kConstant: return "measured (uniform: constant)";
+    case ParameterSource::kDefault: return "not measured (U3M default)";
+    case ParameterSource::kNotApplicable: return "not applicable";
+  }
+  return "unknown";
+}
+
+nlohmann::json RunReportToJson(const RunReport& report) {
+  nlohmann::json j;
+  j["capture"] = {{"name", report.capture_name}, {"path", report.capture_path}};
+  j["output"] = report.output_path;
+  j["status"] = report.status;
+  if (!report.error.empty()) j["error"] = report.error;
+  j["started_utc"] = report.started_utc;
+  j["preset"] = report.preset;
+  j["options"] = report.options;
+  j["steps"] = nlohmann::json::array();
+  for (const auto& step : report.steps) {
+    j["steps"].push_back({{"name", step.name}, {"ran", step.ran}, {"reason", step.reason}, {"seconds", step.seconds}});
+  }
+  j["parameters"] = nlohmann::json::array();
+  for (const auto& p : report.parameters) {
+    j["parameters"].push_back({{"name", p.name},
+                               {"source", ParameterSourceName(p.source)},
+                               {"reason", p.reason},
+                               {"value", p.value},
+                               {"uncertainty", p.uncertainty}});
+  }
+  j["calibration"] = report.calibration;
+  j["quality"] = report.quality;
+  j["warnings"] = report.warnings;
+  j["total_seconds"] = report.total_seconds;
+  j["peak_memory_mib"] = report.peak_memory_mib;
+  return j;
+}
+
+void WriteReportJson(const RunReport& report, const std::filesystem::path& path) {
+  const std::filesystem::path temp = path.string() + ".partial";
+  {
+    std::ofstream out(temp, std::ios::binary);
+    out << RunReportToJson(report).dump(2) << "\n";
+    if (!out) throw InputError(path.string(), "", "a writable location for the report");
+  }
+  std::error_code ec;
+  std::filesystem::rename(temp, path, ec);
+  if (ec) throw InputError(path.string(), "", "a location that can be renamed into: " + ec.message());
+}
+
+}  // namespace u3mscan

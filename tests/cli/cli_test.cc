@@ -1,0 +1,161 @@
+// The u3m subcommands of the `u3mscan` binary: validate, convert, info, example.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "u3m/material.h"
+#include "u3m/material_json.h"
+
+namespace u3mscan {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+std::string Quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  out += '\'';
+  return out;
+}
+
+RunResult U3mscan(const std::string& args) {
+  std::string command = Quote(U3MSCAN_BINARY);
+  command += ' ';
+  command += args;
+  command += " 2>&1";
+  RunResult run;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return run;
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof(buffer), pipe)) run.output += buffer;
+  const int status = pclose(pipe);
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return run;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::path(::testing::TempDir()) / ("u3mscan_cli_" + std::string(info->name()) + "_" + NewUuid4().substr(0, 6));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ignored;
+    fs::remove_all(dir_, ignored);
+  }
+  std::string Path(const std::string& name) const { return Quote((dir_ / name).string()); }
+  fs::path dir_;
+};
+
+TEST_F(Cli, HelpListsTheU3mCommandsAndEachHasHelp) {
+  const RunResult help = U3mscan("--help");
+  EXPECT_EQ(help.exit_code, 0);
+  for (const char* command : {"example", "validate", "convert", "info"}) {
+    EXPECT_NE(help.output.find(command), std::string::npos) << command;
+    const RunResult sub = U3mscan(std::string(command) + " --help");
+    EXPECT_EQ(sub.exit_code, 0) << command;
+    EXPECT_NE(sub.output.find("Usage"), std::string::npos) << command << ": " << sub.output;
+  }
+  EXPECT_NE(U3mscan("validate --help").output.find("Exit status"), std::string::npos);
+}
+
+TEST_F(Cli, ExampleWritesAValidMaterialThatInfoAndValidateRead) {
+  const RunResult example = U3mscan("example -o " + Path("out") + " --size 64");
+  ASSERT_EQ(example.exit_code, 0) << example.output;
+  EXPECT_NE(example.output.find("valid (0 errors, 0 warnings)"), std::string::npos) << example.output;
+  for (const char* file : {"out/example.u3m", "out/textures/basecolor.png", "out/textures/normal.png",
+                           "out/textures/roughness.png", "out/textures/displacement.png"})
+    EXPECT_TRUE(fs::exists(dir_ / file)) << file;
+  const RunResult validate = U3mscan("validate " + Path("out/example.u3m"));
+  EXPECT_EQ(validate.exit_code, 0) << validate.output;
+  const RunResult info = U3mscan("info " + Path("out/example.u3m"));
+  EXPECT_EQ(info.exit_code, 0) << info.output;
+  for (const char* text : {"u3mscan example plain weave", "U3M 1.1", "front", "basecolor", "normal", "roughness",
+                           "displacement", "6.4 x 6.4 mm at 254 dpi", "u3mscan"})
+    EXPECT_NE(info.output.find(text), std::string::npos) << text << "\n" << info.output;
+  // Package and 1.0 forms.
+  EXPECT_EQ(U3mscan("example -o " + Path("pkg") + " --size 64 --package").exit_code, 0);
+  EXPECT_TRUE(fs::exists(dir_ / "pkg/example.u3ma"));
+  EXPECT_EQ(U3mscan("validate " + Path("pkg/example.u3ma")).exit_code, 0);
+  const RunResult v10 = U3mscan("example -o " + Path("v10") + " --size 64 --schema 1.0");
+  EXPECT_EQ(v10.exit_code, 0) << v10.output;
+  EXPECT_NE(v10.output.find("U3M 1.0"), std::string::npos) << v10.output;
+}
+
+TEST_F(Cli, ValidateExitCodesAreZeroOneTwo) {
+  ASSERT_EQ(U3mscan("example -o " + Path("ok") + " --size 64").exit_code, 0);
+  // Invalid: a zone-less timestamp (readable, but breaks the schema).
+  std::ifstream in(dir_ / "ok/example.u3m");
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string invalid = text.str();
+  const auto pos = invalid.find("Z\",");  // end of the first timestamp
+  ASSERT_NE(pos, std::string::npos);
+  invalid.erase(pos, 1);
+  std::ofstream(dir_ / "ok/invalid.u3m") << invalid;
+  std::ofstream(dir_ / "ok/broken.u3m") << "{\"schema\": \"1.1\", \"material\": ";
+
+  const RunResult bad = U3mscan("validate " + Path("ok/invalid.u3m"));
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("/material/created"), std::string::npos) << bad.output;
+  const RunResult broken = U3mscan("validate " + Path("ok/broken.u3m") + " " + Path("ok/example.u3m"));
+  EXPECT_EQ(broken.exit_code, 2) << broken.output;
+  EXPECT_NE(broken.output.find("UNREADABLE"), std::string::npos) << broken.output;
+  EXPECT_EQ(U3mscan("validate " + Path("ok/nothing.u3m")).exit_code, 2);
+}
+
+TEST_F(Cli, ConvertChangesVersionsAndRefusesWhatTheTargetCannotHold) {
+  ASSERT_EQ(U3mscan("example -o " + Path("src") + " --size 64 --schema 1.0").exit_code, 0);
+  const RunResult up = U3mscan("convert " + Path("src/example.u3m") + " " + Path("up/m.u3m") + " --schema 1.1");
+  ASSERT_EQ(up.exit_code, 0) << up.output;
+  EXPECT_TRUE(fs::exists(dir_ / "up/textures/normal.png"));
+  const RunResult down = U3mscan("convert " + Path("up/m.u3m") + " " + Path("down/m.u3ma") + " --schema 1.0");
+  ASSERT_EQ(down.exit_code, 0) << down.output;
+  EXPECT_EQ(U3mscan("validate " + Path("down/m.u3ma")).exit_code, 0);
+  EXPECT_NE(U3mscan("info " + Path("down/m.u3ma")).output.find("U3M 1.0"), std::string::npos);
+  // The full example has physics and a preview: 1.0 cannot hold them; nothing is written.
+  ASSERT_EQ(U3mscan("example -o " + Path("full") + " --size 64").exit_code, 0);
+  const RunResult refused = U3mscan("convert " + Path("full/example.u3m") + " " + Path("no/m.u3m") + " --schema 1.0");
+  EXPECT_EQ(refused.exit_code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("/material/physics"), std::string::npos) << refused.output;
+  EXPECT_FALSE(fs::exists(dir_ / "no"));
+  // An existing output is not replaced without --force.
+  EXPECT_EQ(U3mscan("convert " + Path("up/m.u3m") + " " + Path("up/m.u3m")).exit_code, 2);
+  EXPECT_EQ(U3mscan("convert " + Path("up/m.u3m") + " " + Path("up/m.u3m") + " --force").exit_code, 0);
+}
+
+TEST_F(Cli, ConvertKeepsForeignCustomSectionsOfTheSamples) {
+  const fs::path shared = fs::path(U3MSCAN_SHARED_DIR) / "reference/u3m/samples";
+  if (!fs::exists(shared)) GTEST_SKIP() << "no " << shared << ": sample conversion SKIPPED";
+  const RunResult run = U3mscan("convert " + Quote((shared / "browzwear-1.1-polartec-fleece.u3ma").string()) + " " +
+                          Path("f/fleece.u3m"));
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_EQ(U3mscan("validate " + Path("f/fleece.u3m")).exit_code, 0);
+  const RunResult to10 = U3mscan("convert " + Quote((shared / "browzwear-1.1-polartec-fleece.u3ma").string()) + " " +
+                           Path("g/fleece.u3m") + " --schema 1.0");
+  EXPECT_EQ(to10.exit_code, 2) << to10.output;  // physics and preview
+  std::ifstream written(dir_ / "f/fleece.u3m");
+  std::stringstream text;
+  text << written.rdbuf();
+  EXPECT_NE(text.str().find("\"height\": 63.838661193847659"), std::string::npos);  // Browzwear's own spelling
+  const JsonValue custom = *ParseJson(text.str(), "out").Find("custom");
+  ASSERT_TRUE(custom.is_object());
+  EXPECT_EQ(custom.members().size(), 2u);
+  EXPECT_EQ(custom.members()[0].first, "Browzwear");
+  EXPECT_EQ(custom.members()[1].first, "Vizoo");
+}
+
+}  // namespace
+}  // namespace u3mscan

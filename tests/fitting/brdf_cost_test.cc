@@ -1,0 +1,154 @@
+#include "fitting/brdf_cost.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "core/principled_brdf.h"
+
+namespace u3mscan::fitting {
+namespace {
+
+// Central differences of the double residuals: truncation O(h^2) ~ 1e-8 relative, rounding
+// ~1e-16 / h; the autodiff Jacobian must agree to well within that.
+constexpr double kFiniteDifferenceStep = 1e-5;
+constexpr double kGradientTolerance = 1e-5;   // relative to the column's largest entry
+// Closed-form colour of noise-free data: exact up to rounding and the fixed-point convergence.
+constexpr double kColorTolerance = 1e-9;
+constexpr int kManyLuminancePasses = 12;
+constexpr double kRoundingTolerance = 1e-12;
+
+Eigen::Vector3d Direction(double theta_deg, double phi_deg) {
+  const double t = theta_deg * M_PI / 180.0, p = phi_deg * M_PI / 180.0;
+  return {std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t)};
+}
+
+ParameterVector Params(double roughness, double specular, double specular_tint, double sheen, double sheen_tint,
+                       double anisotropic, double metallic) {
+  return {roughness, specular, specular_tint, sheen, sheen_tint, anisotropic, metallic};
+}
+
+// Observations of one pixel rendered with the core BRDF (directions spread over the hemisphere,
+// views overhead and oblique), optionally perturbed.
+std::vector<LocalObservation> Render(const ParameterVector& p, const Eigen::Vector3d& color, double perturbation,
+                                     std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  PrincipledParams<double> params;
+  params.base_color = color;
+  params.roughness = p[0];
+  params.specular = p[1];
+  params.specular_tint = p[2];
+  params.sheen = p[3];
+  params.sheen_tint = p[4];
+  params.anisotropic = p[5];
+  params.metallic = p[6];
+  std::vector<LocalObservation> out;
+  const Eigen::Vector3d views[] = {Direction(3, 10), Direction(60, 0)};
+  for (const Eigen::Vector3d& v : views) {
+    for (int i = 0; i < 12; ++i) {
+      LocalObservation o;
+      o.light_local = Direction(10.0 + 6.5 * i, 180.0 + 37.0 * i);
+      o.view_local = v;
+      o.irradiance = 1.0 + 0.1 * i;
+      const Vec3<double> f = EvaluatePrincipled(params, Vec3<double>(o.light_local), Vec3<double>(v));
+      o.rgb = f * o.light_local.z() * o.irradiance;
+      for (int c = 0; c < 3; ++c) o.rgb(c) *= 1.0 + perturbation * u(rng);
+      o.weight = Eigen::Vector3d::Constant(100.0);
+      out.push_back(o);
+    }
+  }
+  return out;
+}
+
+TEST(BrdfCost, AutodiffJacobianMatchesFiniteDifferences) {
+  // Interior point with every lobe active, tints in play, and a Huber loss active on perturbed data.
+  const ParameterVector p = Params(0.4, 0.6, 0.3, 0.5, 0.4, 0.3, 0.1);
+  const auto obs = Render(Params(0.3, 0.5, 0.2, 0.7, 0.5, 0.2, 0.0), {0.6, 0.3, 0.2}, 0.2, 7);
+  for (RobustLossKind kind : {RobustLossKind::kNone, RobustLossKind::kHuber, RobustLossKind::kCauchy}) {
+    PixelCostSettings settings;
+    settings.loss.kind = kind;
+    settings.loss.scale = 1.0;
+    settings.luminance_start = 0.3;
+    settings.luminance_passes = 3;
+    Eigen::VectorXd r;
+    Eigen::MatrixXd j;
+    ASSERT_TRUE(EvaluatePixelJacobian(p, obs, settings, &r, &j));
+    std::vector<double> plus(r.size()), minus(r.size()), value(r.size());
+    PixelResiduals(p, obs, settings, value.data());
+    for (int i = 0; i < r.size(); ++i) EXPECT_NEAR(value[i], r(i), kRoundingTolerance * (1.0 + std::abs(r(i))));
+    for (int k = 0; k < kFitParameterCount; ++k) {
+      ParameterVector a = p, b = p;
+      a[k] += kFiniteDifferenceStep;
+      b[k] -= kFiniteDifferenceStep;
+      PixelResiduals(a, obs, settings, plus.data());
+      PixelResiduals(b, obs, settings, minus.data());
+      const double scale = std::max(1.0, j.col(k).cwiseAbs().maxCoeff());
+      for (int i = 0; i < r.size(); ++i) {
+        const double numeric = (plus[i] - minus[i]) / (2.0 * kFiniteDifferenceStep);
+        ASSERT_NEAR(j(i, k), numeric, kGradientTolerance * scale)
+            << FitParameterName(k) << " residual " << i << " loss " << static_cast<int>(kind);
+      }
+    }
+  }
+}
+
+TEST(BrdfCost, ClosedFormBaseColorIsExactOnNoiseFreeData) {
+  const Eigen::Vector3d color(0.55, 0.25, 0.1);
+  // Untinted: one pass is exact. Tinted: the fixed point converges to the exact colour.
+  for (const ParameterVector& p : {Params(0.3, 0.5, 0.0, 0.4, 0.0, 0.0, 0.0), Params(0.3, 0.8, 0.7, 0.6, 0.9, 0.2, 0.0)}) {
+    const auto obs = Render(p, color, 0.0, 1);
+    PixelCostSettings settings;
+    settings.luminance_start = 0.9;  // deliberately far from the true 0.33
+    ParameterMask free{};
+    settings.luminance_passes = LuminancePassesFor(p, free, kManyLuminancePasses);
+    const Eigen::Vector3d solved = SolveBaseColor(p, obs, settings);
+    EXPECT_NEAR(solved(0), color(0), kColorTolerance);
+    EXPECT_NEAR(solved(1), color(1), kColorTolerance);
+    EXPECT_NEAR(solved(2), color(2), kColorTolerance);
+    std::vector<double> r(3 * obs.size());
+    EXPECT_LT(PixelResiduals(p, obs, settings, r.data()), kColorTolerance);
+  }
+}
+
+TEST(BrdfCost, RobustResidualCarriesTheLoss) {
+  // |r'|^2 must equal rho(|r|^2): compare the robust and plain residuals observation by observation.
+  const ParameterVector p = Params(0.3, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0);
+  const auto obs = Render(Params(0.5, 0.9, 0.0, 0.0, 0.0, 0.0, 0.0), {0.5, 0.5, 0.5}, 0.3, 3);
+  PixelCostSettings plain, huber, cauchy;
+  plain.loss.kind = RobustLossKind::kNone;
+  huber.loss = {RobustLossKind::kHuber, 2.0};
+  cauchy.loss = {RobustLossKind::kCauchy, 2.0};
+  std::vector<double> r0(3 * obs.size()), r1(r0.size()), r2(r0.size());
+  PixelResiduals(p, obs, plain, r0.data());
+  PixelResiduals(p, obs, huber, r1.data());
+  PixelResiduals(p, obs, cauchy, r2.data());
+  int outliers = 0;
+  for (std::size_t i = 0; i < obs.size(); ++i) {
+    double s = 0, s1 = 0, s2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      s += r0[3 * i + c] * r0[3 * i + c];
+      s1 += r1[3 * i + c] * r1[3 * i + c];
+      s2 += r2[3 * i + c] * r2[3 * i + c];
+    }
+    const double a = 2.0;
+    const double huber_rho = s <= a * a ? s : 2.0 * a * std::sqrt(s) - a * a;
+    EXPECT_NEAR(s1, huber_rho, 1e-9 * (1.0 + s));
+    EXPECT_NEAR(s2, a * a * std::log1p(s / (a * a)), 1e-9 * (1.0 + s));
+    if (s > a * a) ++outliers;
+  }
+  EXPECT_GT(outliers, 0) << "the test data must exercise the robust branch";
+}
+
+TEST(BrdfCost, DefaultsAreTheU3mDefaults) {
+  EXPECT_EQ(FitParameterDefault(FitParameter::kRoughness), 0.7);
+  EXPECT_EQ(FitParameterDefault(FitParameter::kSpecular), 0.5);
+  EXPECT_EQ(FitParameterDefault(FitParameter::kSheen), 0.0);
+  EXPECT_EQ(FitParameterDefault(FitParameter::kMetallic), 0.0);
+  EXPECT_STREQ(FitParameterName(FitParameter::kSheenTint), "sheen_tint");
+}
+
+}  // namespace
+}  // namespace u3mscan::fitting
