@@ -164,8 +164,8 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
   record.Ran("grid", detail.str());
 }
 
-void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationResult& done,
-                     CalibrationResult& result, Recorder& record) {
+void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
+                     const CalibrationResult& done, CalibrationResult& result, Recorder& record) {
   for (const LightSpec& spec : manifest.lights) {
     LightCalibration calibration;
     calibration.model = LightModelFromSpec(spec);
@@ -183,7 +183,16 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       continue;
     }
     // One placement may use the manifest's centre_mm; several placements are found in their frames.
-    const bool use_known_centre = sphere_indices.size() == 1 && manifest.targets.sphere->center_mm.has_value();
+    // A pose found from one board view maps the sample plane to within a tenth of a pixel but can
+    // be off along the tilt/translation trade-off for points above it (the sphere): the sphere's
+    // centre found in the frame under that same pose then absorbs part of the error, so it is
+    // preferred to the manifest's centre for such cameras (which stays the fall-back).
+    const bool known_centre_available = sphere_indices.size() == 1 && manifest.targets.sphere->center_mm.has_value();
+    std::optional<double> centre_height;
+    if (options.sphere_on_known_height) {
+      centre_height = manifest.targets.sphere->center_mm ? manifest.targets.sphere->center_mm->z()
+                                                         : manifest.targets.sphere->radius_mm;
+    }
     std::vector<SphereObservation> observations;
     for (std::size_t index : sphere_indices) {
       const FrameSpec& frame_spec = manifest.frames[index];
@@ -191,8 +200,22 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       if (!camera) continue;
       try {
         DecodedFrame frame = LoadCorrected(manifest, load, result.dark_ambient, index);
-        observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
-                                             use_known_centre ? manifest.targets.sphere->center_mm : std::nullopt));
+        const bool pose_from_manifest = camera->pose_source == "manifest";
+        if (known_centre_available && pose_from_manifest) {
+          observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
+                                               manifest.targets.sphere->center_mm));
+        } else {
+          try {
+            observations.push_back(
+                ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file, std::nullopt,
+                              centre_height));
+          } catch (const InputError& error) {
+            if (!known_centre_available) throw;
+            LogInfo() << "calibrate: " << error.what() << "; using the manifest's sphere centre";
+            observations.push_back(ObserveSphere(frame.rgb, camera->model, *manifest.targets.sphere, frame_spec.file,
+                                                 manifest.targets.sphere->center_mm));
+          }
+        }
         calibration.sphere_frames.push_back(frame_spec.file);
       } catch (const InputError& error) {
         record.Warn(std::string(error.what()) + " (frame skipped)");
@@ -206,7 +229,7 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
     }
     const LightFit fit = calibration.model.type == LightType::kDirectional
                              ? FitDirectionalLight(observations, calibration.model)
-                             : FitPointLight(observations, calibration.model);
+                             : FitPointLight(observations, calibration.model, options.light_fit);
     calibration.model = fit.model;
     calibration.source = "mirror sphere";
     calibration.placements = fit.placements;
@@ -326,8 +349,20 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
       }
       if (!patches) {
         if (options.use_mcc) LogInfo() << "calibrate: mcc found no chart in " << spec.file << ", using the known layout";
-        patches = MeasureChartAtLayout(frame.rgb, camera->model, options.chart_layout, spec.file);
+        ChartLayout layout = options.chart_layout;
         locator = "known layout";
+        if (!(layout.patch_pitch_mm > 0.0)) {
+          layout.patch_pitch_mm = FindChartPitchMm(frame.rgb, camera->model, layout.centre_mm);
+          if (!(layout.patch_pitch_mm > 0.0)) {
+            throw InputError(spec.file, "", "a 24-patch colour chart (mcc found none, and none fits in the view centred on (" +
+                                                std::to_string(layout.centre_mm.x()) + ", " +
+                                                std::to_string(layout.centre_mm.y()) + ") mm)");
+          }
+          std::ostringstream how;
+          how << "known layout, pitch " << layout.patch_pitch_mm << " mm searched";
+          locator = how.str();
+        }
+        patches = MeasureChartAtLayout(frame.rgb, camera->model, layout, spec.file);
       }
       // Patch readings -> reflectance: divide by exposure, intensity, cosine and irradiance (the
       // measured flat where there is one).
@@ -356,11 +391,13 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
         measured.push_back(rho);
       }
       const ColourFit fit = FitColourCorrection(measured, {reference.begin(), reference.end()});
-      result.colour = {true, spec.file, locator, fit};
+      const bool improves = fit.delta_e_after_mean < fit.delta_e_before_mean;
+      result.colour = {true, improves, spec.file, locator, fit};
       std::ostringstream detail;
       detail << "3x3 correction from " << spec.file << " (chart by " << locator << "): CIEDE2000 mean "
              << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean << " after (max "
-             << fit.delta_e_after_max << ")";
+             << fit.delta_e_after_max << ")"
+             << (improves ? "" : "; not applied: the camera's colours are already closer to the chart");
       record.Ran("colour", detail.str());
       return;
     } catch (const InputError& error) {
@@ -376,7 +413,7 @@ nlohmann::json Vector(const Eigen::Vector3d& v) { return nlohmann::json::array({
 
 bool CalibrationOptions::Check() const {
   return (side == "front" || side == "back") && (!dpi || *dpi > 0.0) && min_board_frames_for_intrinsics >= 3 &&
-         min_board_corners >= 4 && chart_layout.patch_pitch_mm > 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0;
+         min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0;
 }
 
 LightModel LightModelFromSpec(const LightSpec& spec) {
@@ -477,6 +514,7 @@ nlohmann::json CalibrationResult::ToJson() const {
       for (int k = 0; k < 3; ++k) matrix.push_back(colour.fit.matrix(r, k));
     }
     out["colour"] = {{"frame", colour.frame},
+                     {"applied", colour.applied},
                      {"locator", colour.locator},
                      {"matrix", matrix},
                      {"ciede2000_before_mean", colour.fit.delta_e_before_mean},
@@ -514,7 +552,7 @@ CalibrationResult Calibrate(const Manifest& manifest, const FrameLoader& load, c
   CalibrateCameras(manifest, load, options, manifest_file, result, record);
   ReportProgress(progress, "calibrate", 0.4);
   ChooseResultGrid(manifest, options, manifest_file, result, record);
-  CalibrateLights(manifest, load, result, result, record);
+  CalibrateLights(manifest, load, options, result, result, record);
   ReportProgress(progress, "calibrate", 0.6);
   CalibrateFlats(manifest, load, options, result, record);
   ReportProgress(progress, "calibrate", 0.8);
@@ -540,7 +578,7 @@ Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const Calibr
   stack.grid = calibration.grid;
   std::map<std::string, int> view_of_camera, light_of_id;
   std::map<std::string, RectificationMap> maps;
-  const bool colour = options.apply_colour_correction && calibration.colour.fitted;
+  const bool colour = options.apply_colour_correction && calibration.colour.applied;
   const Eigen::Matrix3f colour_matrix = calibration.colour.fit.matrix.cast<float>();
   for (std::size_t n = 0; n < sample_indices.size(); ++n) {
     const std::size_t index = sample_indices[n];

@@ -21,6 +21,7 @@
 #include "capture/camera_model.h"
 #include "capture/colour_calibration.h"
 #include "capture/dark_ambient.h"
+#include "capture/light_calibration.h"
 #include "capture/manifest.h"
 #include "core/image.h"
 #include "core/progress.h"
@@ -41,6 +42,10 @@ struct CalibrationOptions {
   ChartLayout chart_layout;              // where the chart lies when mcc finds none
   bool apply_colour_correction = true;   // in BuildStack, when a chart was fitted
   double min_flat_cos = 0.05;            // flat pixels with grazing light are not measured
+  // Mirror spheres found in their frames rest on the sample plane (centre z = radius), or sit at
+  // the height of the manifest's centre_mm when it gives one; false: the height is fitted too.
+  bool sphere_on_known_height = true;
+  LightFitOptions light_fit;             // highlight accuracy, manifest prior for point lights
   bool Check() const;
 };
 
@@ -77,6 +82,9 @@ struct FlatCalibration {
 
 struct ColourCalibration {
   bool fitted = false;
+  // Applied by BuildStack only when it brings the chart closer to its reference (mean CIEDE2000
+  // after < before): a camera already in sRGB gains nothing but noise from a 3x3 fit.
+  bool applied = false;
   std::string frame;
   std::string locator;  // "mcc" or "known layout"
   ColourFit fit;

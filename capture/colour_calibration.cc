@@ -16,14 +16,18 @@ constexpr int kColumns = 6;
 constexpr int kRows = 4;
 constexpr double kSampledFraction = 0.5;  // the central half of a patch's pitch, clear of its edges
 
-// Mean of the frame over the quadrilateral `corners` (px), 3 channels.
+// Mean of the frame over the quadrilateral `corners` (px), 3 channels; the mask covers only the
+// quadrilateral's bounding box, so a patch costs its own size, not the frame's.
 Rgb MeanOverQuad(const Image& frame, const std::array<cv::Point2f, 4>& corners) {
-  cv::Mat mask = cv::Mat::zeros(frame.height(), frame.width(), CV_8U);
   std::vector<cv::Point> polygon;
   for (const auto& c : corners) polygon.emplace_back(static_cast<int>(std::lround(c.x)), static_cast<int>(std::lround(c.y)));
-  cv::fillConvexPoly(mask, polygon, cv::Scalar(255));
+  const cv::Rect box = cv::boundingRect(polygon) & cv::Rect(0, 0, frame.width(), frame.height());
   Rgb mean{};
-  for (int c = 0; c < 3; ++c) mean[c] = cv::mean(internal::PlaneView(frame, c), mask)[0];
+  if (box.empty()) return mean;
+  for (auto& p : polygon) p -= box.tl();
+  cv::Mat mask = cv::Mat::zeros(box.size(), CV_8U);
+  cv::fillConvexPoly(mask, polygon, cv::Scalar(255));
+  for (int c = 0; c < 3; ++c) mean[c] = cv::mean(internal::PlaneView(frame, c)(box), mask)[0];
   return mean;
 }
 
@@ -79,6 +83,43 @@ std::vector<ChartPatch> MeasureChartAtLayout(const Image& frame_rgb, const Camer
     }
   }
   return patches;
+}
+
+double FindChartPitchMm(const Image& frame_rgb, const CameraModel& camera, const Eigen::Vector2d& centre_mm) {
+  const Eigen::Vector3d centre(centre_mm.x(), centre_mm.y(), 0.0);
+  const double camera_pitch = camera.PitchOnPlaneMm(centre);
+  if (!(camera_pitch > 0.0)) return 0.0;
+  const double min_pitch = 6.0 * camera_pitch;
+  const double max_pitch = camera_pitch * std::max(camera.width, camera.height) / kColumns;
+  const auto& reference = ClassicChartLinearSrgb();
+  const std::vector<Rgb> reference_list(reference.begin(), reference.end());
+  // Score: the linear RGB residual of the 3x3 fit; infinite when a patch leaves the view.
+  auto score = [&](double pitch) {
+    try {
+      const auto patches = MeasureChartAtLayout(frame_rgb, camera, {centre_mm, pitch}, "");
+      std::vector<Rgb> measured;
+      for (const auto& p : patches) measured.push_back(p.mean_rgb);
+      return FitColourCorrection(measured, reference_list).rms_rgb_after;
+    } catch (const InputError&) {
+      return 1e300;
+    }
+  };
+  double best_pitch = 0.0, best_score = 1e300;
+  for (double pitch = min_pitch; pitch <= max_pitch; pitch *= 1.03) {
+    const double s = score(pitch);
+    if (s < best_score) best_score = s, best_pitch = pitch;
+  }
+  if (best_pitch == 0.0) return 0.0;
+  // Every pitch that keeps the sampled centres inside their patches fits equally well (a plateau
+  // some +-7 % wide); the true pitch is its middle. Fine scan, then the plateau's geometric centre.
+  std::vector<std::pair<double, double>> fine;
+  for (double pitch = best_pitch / 1.2; pitch <= best_pitch * 1.2; pitch *= 1.004) fine.emplace_back(pitch, score(pitch));
+  const auto best = std::min_element(fine.begin(), fine.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+  const double threshold = 1.5 * best->second + 1e-4;
+  auto lo = best, hi = best;
+  while (lo != fine.begin() && std::prev(lo)->second <= threshold) --lo;
+  while (std::next(hi) != fine.end() && std::next(hi)->second <= threshold) ++hi;
+  return std::sqrt(lo->first * hi->first);
 }
 
 std::optional<std::vector<ChartPatch>> MeasureChartWithMcc(const Image& frame_rgb) {

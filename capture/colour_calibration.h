@@ -24,10 +24,10 @@ namespace u3mscan {
 const std::array<Rgb, 24>& ClassicChartLinearSrgb();
 
 // Where the chart lies on the sample plane when no detector finds it: 6 x 4 patches, row 0 at
-// +y, column 0 at -x, centred on `centre_mm`, `patch_pitch_mm` apart.
+// +y, column 0 at -x, centred on `centre_mm`, `patch_pitch_mm` apart (0 = unknown: searched).
 struct ChartLayout {
   Eigen::Vector2d centre_mm = Eigen::Vector2d::Zero();
-  double patch_pitch_mm = 10.0;
+  double patch_pitch_mm = 0.0;
 };
 
 struct ChartPatch {
@@ -39,6 +39,11 @@ struct ChartPatch {
 // lies outside the view.
 std::vector<ChartPatch> MeasureChartAtLayout(const Image& frame_rgb, const CameraModel& camera,
                                              const ChartLayout& layout, const std::string& frame_file);
+// The patch pitch (mm) of a chart centred on `centre_mm` whose patch means a 3x3 matrix maps onto
+// the reference best: a coarse-to-fine search between 6 camera pixels and a sixth of the view.
+// Returns 0 when no pitch puts the whole chart in view.
+double FindChartPitchMm(const Image& frame_rgb, const CameraModel& camera, const Eigen::Vector2d& centre_mm);
+
 // The 24 patches found by cv::mcc (nullopt when it finds no chart). `reference` orders the two
 // possible orientations: the one whose 3x3 fit leaves the smaller residual wins.
 std::optional<std::vector<ChartPatch>> MeasureChartWithMcc(const Image& frame_rgb);

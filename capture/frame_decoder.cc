@@ -347,18 +347,24 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
   const float srgb_white = 254.5f / 255.0f;
 
   const int nch = spec.nchannels;
-  const int tiled = spec.tile_width > 0;
+  // Scanline files are read in bands of kRowsPerRead full rows; tiled files one row of tiles at
+  // a time, only the tile columns the region touches (read_tiles needs tile-aligned bounds).
+  const bool tiled = spec.tile_width > 0 && spec.tile_height > 0;
+  const int band_rows = tiled ? spec.tile_height : kRowsPerRead;
+  const int buf_x0 = tiled ? x / spec.tile_width * spec.tile_width : 0;
+  const int buf_x1 =
+      tiled ? std::min(spec.width, (x + w + spec.tile_width - 1) / spec.tile_width * spec.tile_width) : spec.width;
+  const int buf_w = buf_x1 - buf_x0;
+  const int read_y0 = tiled ? y / spec.tile_height * spec.tile_height : y;
+  const int read_y1 = y + h;
   std::vector<float> buffer;
-  // Tiled files are read whole (OIIO reads scanline ranges of scanline files only).
-  const int band_rows = tiled ? spec.height : kRowsPerRead;
-  const int read_y0 = tiled ? 0 : y;
-  const int read_y1 = tiled ? spec.height : y + h;
   for (int band = read_y0; band < read_y1; band += band_rows) {
-    const int band_end = std::min(read_y1, band + band_rows);
-    buffer.resize(static_cast<std::size_t>(band_end - band) * spec.width * nch);
+    const int band_end = tiled ? std::min(spec.height, band + band_rows) : std::min(read_y1, band + band_rows);
+    buffer.resize(static_cast<std::size_t>(band_end - band) * buf_w * nch);
     bool ok;
     if (tiled) {
-      ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
+      ok = in->read_tiles(0, 0, spec.x + buf_x0, spec.x + buf_x1, spec.y + band, spec.y + band_end, spec.z,
+                          spec.z + std::max(1, spec.depth), 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     } else {
       ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     }
@@ -370,7 +376,7 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
     ParallelFor(static_cast<std::size_t>(std::max(0, row_end - row_begin)), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         const int row = row_begin + static_cast<int>(i);
-        const float* src = buffer.data() + (static_cast<std::size_t>(row - band) * spec.width + x) * nch;
+        const float* src = buffer.data() + (static_cast<std::size_t>(row - band) * buf_w + (x - buf_x0)) * nch;
         const int out_row = row - y;
         std::uint8_t* sat = out.saturated.data() + static_cast<std::size_t>(out_row) * w;
         for (int c = 0; c < w; ++c) {

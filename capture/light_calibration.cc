@@ -49,7 +49,8 @@ double ApparentRadiusPx(const CameraModel& camera, const Eigen::Vector3d& centre
 // Sphere search: Hough circle on the display image, sub-pixel rim along radial profiles, then the
 // 3D centre whose tangent cone fits the rim rays (Gauss-Newton on 3 unknowns).
 Eigen::Vector3d FindSphere(const cv::Mat& grey, const cv::Mat& grey8, const CameraModel& camera,
-                           const SphereTarget& sphere, const std::string& frame_file, double* edge_residual_px) {
+                           const SphereTarget& sphere, const std::string& frame_file,
+                           const std::optional<double>& centre_height_mm, double* edge_residual_px) {
   // Expected size from a sphere resting on the sample plane below the image centre.
   Eigen::Vector3d guess_centre;
   const Eigen::Vector2d image_centre(camera.intrinsics.cx, camera.intrinsics.cy);
@@ -114,33 +115,67 @@ Eigen::Vector3d FindSphere(const cv::Mat& grey, const cv::Mat& grey8, const Came
   const double f = 0.5 * (camera.intrinsics.fx + camera.intrinsics.fy);
   const double distance = sphere.radius_mm / std::sin(std::atan(median / f));
   Eigen::Vector3d centre = origin + distance * camera.PixelRayInWorld(Eigen::Vector2d(u0, v0));
+  if (centre_height_mm) {
+    // Known height: start where the ray through the circle's centre meets it.
+    const Eigen::Vector3d ray = camera.PixelRayInWorld(Eigen::Vector2d(u0, v0));
+    if (std::abs(ray.z()) > 1e-9) centre = origin + ((*centre_height_mm - origin.z()) / ray.z()) * ray;
+    centre.z() = *centre_height_mm;
+  }
+  // The apparent size fixes the sphere's distance only to about rim accuracy / radius in px (a
+  // hundredth of a pixel is 0.1 mm at 400 mm): with the height known, only x and y are fitted.
+  const int unknowns = centre_height_mm ? 2 : 3;
   auto residuals = [&](const Eigen::Vector3d& c) {
     Eigen::VectorXd r(rays.size());
     for (std::size_t i = 0; i < rays.size(); ++i) r[i] = (c - origin).cross(rays[i]).norm() - sphere.radius_mm;
     return r;
   };
-  for (int iteration = 0; iteration < 30; ++iteration) {
-    const Eigen::VectorXd r = residuals(centre);
-    Eigen::MatrixXd jacobian(rays.size(), 3);
-    for (int k = 0; k < 3; ++k) {
-      Eigen::Vector3d step = Eigen::Vector3d::Zero();
-      step[k] = 1e-4;
-      jacobian.col(k) = (residuals(centre + step) - r) / 1e-4;
+  auto solve = [&](Eigen::Vector3d c) {
+    for (int iteration = 0; iteration < 30; ++iteration) {
+      const Eigen::VectorXd r = residuals(c);
+      Eigen::MatrixXd jacobian(rays.size(), unknowns);
+      for (int k = 0; k < unknowns; ++k) {
+        Eigen::Vector3d step = Eigen::Vector3d::Zero();
+        step[k] = 1e-4;
+        jacobian.col(k) = (residuals(c + step) - r) / 1e-4;
+      }
+      const Eigen::VectorXd solved = jacobian.colPivHouseholderQr().solve(-r);
+      Eigen::Vector3d delta = Eigen::Vector3d::Zero();
+      delta.head(unknowns) = solved;
+      c += delta;
+      if (delta.norm() < 1e-9) break;
     }
-    const Eigen::Vector3d delta = jacobian.colPivHouseholderQr().solve(-r);
-    centre += delta;
-    if (delta.norm() < 1e-9) break;
+    return c;
+  };
+  // Rim points on a cast shadow or a reflection that touches the rim are off by a little; fit,
+  // drop what lies beyond 3 robust sigmas (at least a tenth of a pixel), fit again.
+  const double px_per_mm_at_sphere = f / (centre - origin).norm();
+  for (int round = 0; round < 3; ++round) {
+    centre = solve(centre);
+    const Eigen::VectorXd r = residuals(centre);
+    std::vector<double> abs_r(r.size());
+    for (Eigen::Index i = 0; i < r.size(); ++i) abs_r[i] = std::abs(r[i]);
+    std::vector<double> sorted_r = abs_r;
+    std::nth_element(sorted_r.begin(), sorted_r.begin() + sorted_r.size() / 2, sorted_r.end());
+    const double limit = std::max(0.1 / px_per_mm_at_sphere, 3.0 * 1.4826 * sorted_r[sorted_r.size() / 2]);
+    std::vector<Eigen::Vector3d> kept;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (abs_r[i] <= limit) kept.push_back(rays[i]);
+    }
+    if (kept.size() < kAngles / 3 || kept.size() == rays.size()) break;
+    rays = std::move(kept);
   }
-  // Rim residual in pixels: the angular residual times the focal length.
+  centre = solve(centre);
+  // Rim residual in pixels: the distance residual (mm at the sphere) times pixels per mm there.
   const Eigen::VectorXd r = residuals(centre);
-  *edge_residual_px = std::sqrt(r.squaredNorm() / r.size()) / (centre - origin).norm() * f;
+  *edge_residual_px = std::sqrt(r.squaredNorm() / r.size()) * f / (centre - origin).norm();
   return centre;
 }
 
 }  // namespace
 
 SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camera, const SphereTarget& sphere,
-                                const std::string& frame_file, const std::optional<Eigen::Vector3d>& known_centre) {
+                                const std::string& frame_file, const std::optional<Eigen::Vector3d>& known_centre,
+                                const std::optional<double>& centre_height_mm) {
   if (!(sphere.radius_mm > 0.0)) {
     throw InputError(frame_file, "/targets/sphere/radius_mm", "a positive sphere radius in mm");
   }
@@ -158,7 +193,8 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
     cv::sort(sorted, sorted, cv::SORT_ASCENDING);
     const double white = std::max(1e-6f, sorted.at<float>(0, sorted.cols * 90 / 100));
     observation.centre_in_world_mm =
-        FindSphere(grey, internal::ToDisplay8(grey, white), camera, sphere, frame_file, &observation.edge_residual_px);
+        FindSphere(grey, internal::ToDisplay8(grey, white), camera, sphere, frame_file, centre_height_mm,
+                   &observation.edge_residual_px);
     observation.centre_found_in_frame = true;
   }
 
@@ -197,6 +233,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   cv::connectedComponents(bright, labels, 8, CV_32S);
   const int label = labels.at<int>(peak_at);
   double sum_w = 0.0, sum_x = 0.0, sum_y = 0.0;
+  int area = 0;
   for (int row = 0; row < grey.rows; ++row) {
     const int* l = labels.ptr<int>(row);
     const float* g = grey.ptr<float>(row);
@@ -204,6 +241,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
       if (l[col] != label) continue;
       const double w = g[col] - background;
       sum_w += w, sum_x += w * col, sum_y += w * row;
+      ++area;
     }
   }
   observation.highlight_px = sum_w > 0 ? Eigen::Vector2d(sum_x / sum_w, sum_y / sum_w)
@@ -216,6 +254,8 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   const Eigen::Vector3d normal = (hit - observation.centre_in_world_mm).normalized();
   const Eigen::Vector3d to_camera = -ray;
   observation.highlight_point_in_world_mm = hit;
+  observation.apparent_radius_px = radius_px;
+  observation.highlight_area_px = area;
   observation.reflected_in_world = (2.0 * normal.dot(to_camera) * normal - to_camera).normalized();
   return observation;
 }
@@ -240,40 +280,60 @@ LightFit FitDirectionalLight(const std::vector<SphereObservation>& observations,
   return fit;
 }
 
-LightFit FitPointLight(const std::vector<SphereObservation>& observations, const LightModel& start) {
+LightFit FitPointLight(const std::vector<SphereObservation>& observations, const LightModel& start,
+                       const LightFitOptions& options) {
   LightFit fit;
   fit.model = start;
   fit.model.type = LightType::kPoint;
   fit.placements = static_cast<int>(observations.size());
   fit.residual_unit = "mm";
   if (observations.empty()) return fit;
-  if (observations.size() == 1) {
+  const bool prior = options.manifest_position_sigma_mm > 0.0;
+  if (observations.size() == 1 && !prior) {
     const auto& o = observations.front();
     const double along = std::max(0.0, o.reflected_in_world.dot(start.position_in_world_mm - o.highlight_point_in_world_mm));
     fit.model.position_in_world_mm = o.highlight_point_in_world_mm + along * o.reflected_in_world;
     fit.note = "one placement: direction from the sphere, distance along the ray from the manifest";
     return fit;
   }
-  // Minimise sum_i |(I - l_i l_i^T)(X - P_i)|^2: the point nearest to all reflected rays.
-  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d b = Eigen::Vector3d::Zero();
-  for (const auto& o : observations) {
-    const Eigen::Matrix3d projector =
-        Eigen::Matrix3d::Identity() - o.reflected_in_world * o.reflected_in_world.transpose();
-    a += projector;
-    b += projector * o.highlight_point_in_world_mm;
+  // Minimise sum_i w_i |(I - l_i l_i^T)(X - P_i)|^2 + |X - X_manifest|^2 / sigma_m^2, with
+  // w_i = 1 / (sigma_i d_i)^2: a ray's lateral uncertainty grows with the distance d_i along it.
+  // The weights depend on X, so a few fixed-point rounds from the manifest's position.
+  Eigen::Vector3d x = start.position_in_world_mm;
+  Eigen::Matrix3d a = Eigen::Matrix3d::Identity();
+  for (int round = 0; round < 6; ++round) {
+    a.setZero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (const auto& o : observations) {
+      const Eigen::Matrix3d projector =
+          Eigen::Matrix3d::Identity() - o.reflected_in_world * o.reflected_in_world.transpose();
+      const double sigma_px = options.highlight_sigma_px / std::sqrt(std::max(1, o.highlight_area_px));
+      const double sigma_rad = 2.0 * sigma_px / std::max(1.0, o.apparent_radius_px);
+      const double distance = std::max(1.0, (x - o.highlight_point_in_world_mm).norm());
+      const double w = 1.0 / (sigma_rad * sigma_rad * distance * distance);
+      a += w * projector;
+      b += w * projector * o.highlight_point_in_world_mm;
+    }
+    if (prior) {
+      const double w = 1.0 / (options.manifest_position_sigma_mm * options.manifest_position_sigma_mm);
+      a += w * Eigen::Matrix3d::Identity();
+      b += w * start.position_in_world_mm;
+    }
+    x = a.ldlt().solve(b);
   }
-  fit.model.position_in_world_mm = a.ldlt().solve(b);
+  fit.model.position_in_world_mm = x;
   double sum_sq = 0.0;
   for (const auto& o : observations) {
-    const Eigen::Vector3d d = fit.model.position_in_world_mm - o.highlight_point_in_world_mm;
+    const Eigen::Vector3d d = x - o.highlight_point_in_world_mm;
     sum_sq += (d - d.dot(o.reflected_in_world) * o.reflected_in_world).squaredNorm();
   }
   fit.residual = std::sqrt(sum_sq / observations.size());
-  // Rays that are nearly parallel meet nowhere in particular.
-  const double spread = std::acos(std::clamp(observations.front().reflected_in_world.dot(
-                                                 observations.back().reflected_in_world), -1.0, 1.0));
-  if (spread < DegToRad(0.5)) fit.note = "placements' rays nearly parallel: position poorly constrained";
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(a.inverse());
+  fit.position_sigma_mm = std::sqrt(std::max(0.0, eigen.eigenvalues().maxCoeff()));
+  std::ostringstream note;
+  note << "position 1-sigma " << fit.position_sigma_mm << " mm";
+  if (prior) note << " (manifest prior " << options.manifest_position_sigma_mm << " mm)";
+  fit.note = note.str();
   return fit;
 }
 

@@ -27,14 +27,30 @@ struct SphereObservation {
   Eigen::Vector2d highlight_px = Eigen::Vector2d::Zero();
   Eigen::Vector3d highlight_point_in_world_mm = Eigen::Vector3d::Zero();  // on the sphere
   Eigen::Vector3d reflected_in_world = Eigen::Vector3d::UnitZ();          // unit, toward the light
+  double apparent_radius_px = 0.0;  // the sphere's radius in the image
+  int highlight_area_px = 0;        // pixels of the highlight blob
+};
+
+struct LightFitOptions {
+  // How well a highlight is located (px, 1 sigma), for a highlight of one pixel: one smaller than
+  // a pixel cannot be placed better than about 0.3 px (uniform within the pixel). A blob of N
+  // pixels is located sqrt(N) times better. The angular uncertainty of the reflected ray is
+  // 2 * sigma / apparent_radius_px.
+  double highlight_sigma_px = 0.3;
+  // The manifest's point-light position as a prior (mm, 1 sigma); 0 = no prior. Two placements
+  // close together fix a light's direction well and its distance poorly: the prior keeps the
+  // distance where the spheres cannot tell.
+  double manifest_position_sigma_mm = 10.0;
 };
 
 // Locates the sphere and its highlight in a linear frame of `camera` (pose known). `known_centre`
-// (the manifest's centre_mm) skips the sphere search. Throws InputError naming `frame_file` when
-// the sphere or the highlight is not found.
+// (the manifest's centre_mm) skips the sphere search; `centre_height_mm` (z of the centre, e.g.
+// the radius for a sphere resting on the sample plane) lets the search fit x and y only. Throws
+// InputError naming `frame_file` when the sphere or the highlight is not found.
 SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camera, const SphereTarget& sphere,
                                 const std::string& frame_file,
-                                const std::optional<Eigen::Vector3d>& known_centre);
+                                const std::optional<Eigen::Vector3d>& known_centre,
+                                const std::optional<double>& centre_height_mm = std::nullopt);
 
 struct LightFit {
   LightModel model;
@@ -44,13 +60,17 @@ struct LightFit {
   double residual = 0.0;
   std::string residual_unit;  // "deg" or "mm"
   std::string note;           // e.g. "one placement: distance along the ray from the manifest"
+  double position_sigma_mm = 0.0;  // point lights: 1-sigma uncertainty along the worst direction
 };
 
 // `start` carries the id, type, intensity and profile (from the manifest); its direction or
 // position is replaced. Needs at least one observation.
 LightFit FitDirectionalLight(const std::vector<SphereObservation>& observations, const LightModel& start);
-// Two or more placements: the least-squares meeting point of the reflected rays. One placement:
-// the point of that ray nearest to start.position_in_world_mm (the manifest's position).
-LightFit FitPointLight(const std::vector<SphereObservation>& observations, const LightModel& start);
+// The weighted least-squares meeting point of the reflected rays (each weighted by its angular
+// uncertainty times the distance), with the manifest's position (start.position_in_world_mm) as a
+// prior of options.manifest_position_sigma_mm. One placement and no prior: the point of the ray
+// nearest to the manifest's position.
+LightFit FitPointLight(const std::vector<SphereObservation>& observations, const LightModel& start,
+                       const LightFitOptions& options = {});
 
 }  // namespace u3mscan

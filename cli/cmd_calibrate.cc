@@ -147,7 +147,7 @@ U3MSCAN_REGISTER_COMMAND(kCalibrateCommand, "calibrate",
                                           "Chart centre x y (mm) when mcc finds no chart")
                                ->expected(2);
                            sub.add_option("--chart-pitch-mm", args->options.chart_layout.patch_pitch_mm,
-                                          "Chart patch pitch (mm) when mcc finds no chart")
+                                          "Chart patch pitch (mm) when mcc finds no chart (0: searched)")
                                ->capture_default_str();
                            sub.add_flag("--no-mcc", args->no_mcc, "Do not try the mcc chart detector");
                            sub.add_flag("--no-intrinsics", args->no_intrinsics,

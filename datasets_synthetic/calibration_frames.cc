@@ -74,9 +74,12 @@ CalibrationTargets MakeCalibrationTargets(const Rig& rig) {
   const bool point_lights = std::any_of(rig.lights.begin(), rig.lights.end(),
                                         [](const RigLight& l) { return l.type == RigLightType::kPoint; });
   if (point_lights) {
+    // Three placements spread over the view: light positions are triangulated from the rays the
+    // highlights give, and the baseline between placements sets how well the distance is known
+    // (two placements 0.44 of the view apart left 2-5 % distance errors at 400 mm).
     t.sphere_radius_mm = 0.12 * short_side;
-    const double offset = 0.22 * view.x();
-    t.sphere_centers_mm = {{-offset, 0, t.sphere_radius_mm}, {offset, 0, t.sphere_radius_mm}};
+    const double r = t.sphere_radius_mm, dx = 0.32 * view.x();
+    t.sphere_centers_mm = {{-dx, -0.22 * view.y(), r}, {dx, -0.22 * view.y(), r}, {0, 0.28 * view.y(), r}};
   } else {
     t.sphere_radius_mm = 0.2 * short_side;
     t.sphere_centers_mm = {{0, 0, t.sphere_radius_mm}};

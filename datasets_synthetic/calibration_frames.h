@@ -35,7 +35,7 @@ struct CalibrationTargets {
   BoardSpec board;
   double white_reflectance = 0.9;  // the flat-field target, Lambertian
   double sphere_radius_mm = 10.0;
-  // One placement for directional rigs, two for point lights (light positions are triangulated).
+  // One placement for directional rigs, three for point lights (light positions are triangulated).
   std::vector<Eigen::Vector3d> sphere_centers_mm;
   double sphere_highlight_level = 0.8;  // decoded value of the mirrored emitter, below saturation
   std::array<double, 4> chart_rect_mm{};  // [x0, y0, x1, y1] of the chart's outer edge

@@ -2,7 +2,9 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <system_error>
@@ -89,13 +91,13 @@ std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const 
       add(c, "frames/" + cam + "/" + rig.lights[l].id + ext, FrameRole::kSample, l, [l, ambient](SceneRenderer& r) {
         Image img = r.RenderLight(l);
         if (ambient) {
-          const Image amb = r.RenderAmbient();
+          const Image& amb = r.AmbientImage();
           for (std::size_t i = 0; i < img.data().size(); ++i) img.data()[i] += amb.data()[i];
         }
         return img;
       });
     }
-    if (ambient) add(c, "frames/" + cam + "/ambient" + ext, FrameRole::kAmbient, std::nullopt, [](SceneRenderer& r) { return r.RenderAmbient(); });
+    if (ambient) add(c, "frames/" + cam + "/ambient" + ext, FrameRole::kAmbient, std::nullopt, [](SceneRenderer& r) { return r.AmbientImage(); });
     if (!options.calibration_frames) continue;
     const std::string dir = "calibration/" + cam + "/";
     add(c, dir + "dark" + ext, FrameRole::kDark, std::nullopt, [&rig, c](SceneRenderer&) { return RenderDarkFrame(rig, c); });

@@ -8,8 +8,9 @@
 // at x = (col + 0.5 - W/2) pitch, y = (H/2 - row - 0.5) pitch, z = height_mm. Outside it, a
 // Lambertian table of Rig::table_reflectance at z = 0. Every camera pixel casts one ray through its
 // centre (undistorted), marches the height field and refines the hit by bisection, and shades it with
-// the Principled BRDF of core/principled_brdf.h in the surface's local frame (z = normal, x = +x
-// projected onto the tangent plane, the direction of anisotropy). Cast shadows: a march from the
+// the Principled BRDF of core/principled_brdf.h in the surface's local frame (z = normal, x = the
+// scene's tangent map, the fibre direction and axis of anisotropy, or +x projected onto the
+// tangent plane when the scene has none). Cast shadows: a march from the
 // hit toward the light. Holes (alpha < 1) blend the fabric with the table below.
 
 #include <Eigen/Core>
@@ -45,6 +46,9 @@ class SceneRenderer {
   Image RenderLight(int light_index) const;
   // 3 channels: the room light alone, a uniform sky of Rig::ambient_irradiance (no occlusion).
   Image RenderAmbient() const;
+  // RenderAmbient of the current camera, computed once and kept until the next SetCamera (every
+  // sample frame carries the room light).
+  const Image& AmbientImage();
   // 1 channel: a light table of apparent value `level` behind the sample, front lights off. Where
   // the camera sees the sample, (1 - alpha) of it comes through; around the sample, all of it.
   Image RenderBacklight(double level) const;
@@ -65,7 +69,8 @@ class SceneRenderer {
   int camera_index_ = -1;
   double half_width_mm_ = 0, half_height_mm_ = 0;
   double min_height_mm_ = 0, max_height_mm_ = 0;
-  std::vector<float> hits_;  // x, y, z per camera pixel
+  std::vector<float> hits_;  // x, y, z, vignetting per camera pixel
+  Image ambient_;            // AmbientImage() cache, empty until asked
 };
 
 // A flat Lambertian target lying in z = 0 (white target, ChArUco board, colour chart): `albedo` is a
@@ -87,7 +92,7 @@ Image RenderPlaneTarget(const Rig& rig, int camera_index, const PlaneTarget& tar
 // by the light and shadowed by the sphere. The mirrored emitter is a Gaussian spot of peak
 // `highlight_level` centred exactly on the image of the reflection point (where the sphere normal
 // bisects the directions to light and camera), sigma from the emitter's angular size, at least
-// 0.8 px: a highlight much smaller than a pixel, as a lens would blur it, with an unbiased centroid.
+// 1 px: a highlight much smaller than a pixel, as a lens would blur it, with an unbiased centroid.
 // Supersampled like RenderPlaneTarget.
 Image RenderMirrorSphere(const Rig& rig, int camera_index, const RigLight& light, const Eigen::Vector3d& center_mm,
                          double radius_mm, double highlight_level, int samples_per_axis,

@@ -26,7 +26,7 @@ struct ClusteringOptions {
   double gloss_weight = 1.0;  // multiplies the 4 gloss-profile features
   // Seeding stops once every pixel is closer than this to a centre (feature units, see
   // AppearanceFeatures): a uniform sample becomes one cluster instead of k arbitrary slices.
-  double min_separation = 0.15;
+  double min_separation = 0.3;
 
   bool Check() const;
 };

@@ -35,7 +35,7 @@ std::string Hint(FitParameter p, const ObservabilityContext& context) {
       return "anisotropy needs highlights seen from several azimuths";
     case FitParameter::kSpecular:
     case FitParameter::kRoughness:
-      return "needs lights that put highlights on the sample";
+      return "needs lights that put highlights on the sample (and has no effect on a metal)";
     case FitParameter::kMetallic:
       return "metallic trades off against specular and base colour";
   }

@@ -47,6 +47,11 @@ constexpr double kMaxNormalLength = 1.5;
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
+// Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
+constexpr double kMetallicStart = 0.7;
+// Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
+// whose cost does not drop within them keeps the cluster value; this is the cheap stage).
+constexpr double kMinStepScale = 0.3;
 // Largest number of parameters the per-pixel step refines (roughness, specular).
 constexpr int kMaxPixelParameters = 2;
 
@@ -226,14 +231,16 @@ PixelCostSettings Settings(const FitOptions& options, const ParameterVector& par
   return s;
 }
 
+// Cost over at most `pixel_limit` samples; `free` decides the luminance passes (see Settings).
 double SamplesCost(const ClusterSamples& samples, std::size_t pixel_limit, const ParameterVector& params,
-                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& none = {}) {
+                   const FitOptions& options, std::vector<double>& residuals, const ParameterMask& free = {}) {
   double cost = 0.0;
   const std::size_t pixels = std::min(pixel_limit, samples.pixels());
-  for (std::size_t p = 0; p < pixels; ++p) {
+  for (std::size_t j = 0; j < pixels; ++j) {
+    const std::size_t p = j * samples.pixels() / pixels;  // evenly spread over the samples
     const auto obs = samples.pixel(p);
     residuals.resize(3 * obs.size());
-    cost += PixelResiduals(params, obs, Settings(options, params, none, samples.luminance_start[p]), residuals.data());
+    cost += PixelResiduals(params, obs, Settings(options, params, free, samples.luminance_start[p]), residuals.data());
   }
   return cost;
 }
@@ -358,119 +365,187 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     samples.luminance_start[p] = std::max(kMinStartLuminance, Luminance(c));
   }
 
+  ObservabilityContext context;
+  context.pixel_count = static_cast<int>(samples.pixels());
+  context.max_grazing_weight = max_grazing;
+  Matrix7 fisher;
+  // Fisher information (and the context's cost) at `p` with `free` deciding the colour passes.
+  auto update_fisher = [&](const ParameterVector& p, const ParameterMask& free) {
+    const auto t_obs = Clock::now();
+    double cost = 0.0;
+    int residual_count = 0;
+    fisher = FisherInformation(samples, p, options, free, &cost, &residual_count);
+    context.cost = cost;
+    context.residual_count = residual_count;
+    *observability_s += Seconds(t_obs);
+  };
+  // The leave-out rule over `free`, then: keep a left-out parameter whose default the data exclude.
+  auto decide = [&](const ParameterVector& p, const ParameterMask& free) {
+    update_fisher(p, free);
+    const auto t_obs = Clock::now();
+    ObservabilityDecision d = DecideObservability(fisher, free, context, options.observability);
+    const double cost_at_fit = SamplesCost(samples, samples.pixels(), p, options, residuals, free);
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!free[i] || d.measured[i]) continue;
+      ParameterVector trial_default = p;
+      trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
+      const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, free);
+      const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
+      if (chi2 > options.observability.default_rejection_chi2) {
+        d.measured[i] = true;
+        char buffer[200];
+        std::snprintf(buffer, sizeof buffer,
+                      "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
+                      "(chi^2 +%.3g): kept at the fitted value",
+                      d.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
+        d.reason[i] = buffer;
+      }
+    }
+    *observability_s += Seconds(t_obs);
+    return d;
+  };
+  // Left-out parameters to their defaults and a refit without them; returns the solve's outcome.
+  auto refit_without_left_out = [&](ParameterVector& p, const ParameterMask& measured) {
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!measured[i]) p[i] = FitParameterDefault(static_cast<FitParameter>(i));
+    }
+    const ParameterVector before = p;
+    SolveOutcome o = SolveCluster(samples, measured, options, p);
+    if (!o.usable) {
+      LogError() << "fitting: cluster " << id << " refit failed (" << o.message << ")";
+      p = before;
+      o.converged = false;
+      o.message = "refit failed: " + o.message;
+      return o;
+    }
+    return o;
+  };
+
   // First solve with every candidate free.
   SolveOutcome outcome = SolveCluster(samples, candidates, options, params);
   if (!outcome.usable) {
     LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
     params = start;
   }
+  const SolveOutcome first = outcome;
+  int iterations = first.iterations;
 
   // Observability at the solution, then a refit with the left-out parameters at their defaults.
-  const auto t_obs = Clock::now();
-  double cost = 0.0;
-  int residual_count = 0;
-  Matrix7 fisher = FisherInformation(samples, params, options, candidates, &cost, &residual_count);
-  ObservabilityContext context;
-  context.pixel_count = static_cast<int>(samples.pixels());
-  context.residual_count = residual_count;
-  context.cost = cost;
-  context.max_grazing_weight = max_grazing;
-  ObservabilityDecision decision = DecideObservability(fisher, candidates, context, options.observability);
-  // Keep a left-out parameter whose default the data exclude.
-  const double cost_at_fit = SamplesCost(samples, samples.pixels(), params, options, residuals, candidates);
-  for (int i = 0; i < kFitParameterCount; ++i) {
-    if (!candidates[i] || decision.measured[i]) continue;
-    ParameterVector trial_default = params;
-    trial_default[i] = FitParameterDefault(static_cast<FitParameter>(i));
-    const double cost_at_default = SamplesCost(samples, samples.pixels(), trial_default, options, residuals, candidates);
-    const double chi2 = EffectiveChi2Increase(cost_at_fit, cost_at_default, context, options.observability);
-    if (chi2 > options.observability.default_rejection_chi2) {
-      decision.measured[i] = true;
-      char buffer[200];
-      std::snprintf(buffer, sizeof buffer,
-                    "weakly constrained (posterior std %.3g), but the data exclude the default %.3g "
-                    "(chi^2 +%.3g): kept at the fitted value",
-                    decision.std_dev[i], FitParameterDefault(static_cast<FitParameter>(i)), chi2);
-      decision.reason[i] = buffer;
-    }
-  }
-  *observability_s += Seconds(t_obs);
-  const SolveOutcome first = outcome;
+  ObservabilityDecision decision = decide(params, candidates);
   if (decision.measured != candidates) {
-    for (int i = 0; i < kFitParameterCount; ++i) {
-      if (!decision.measured[i]) params[i] = FitParameterDefault(static_cast<FitParameter>(i));
-    }
-    ParameterVector before = params;
-    outcome = SolveCluster(samples, decision.measured, options, params);
-    if (!outcome.usable) {
-      LogError() << "fitting: cluster " << id << " refit failed (" << outcome.message << ")";
-      params = before;
-    }
-    const auto t_obs2 = Clock::now();
-    fisher = FisherInformation(samples, params, options, decision.measured, &cost, &residual_count);
-    context.cost = cost;
-    context.residual_count = residual_count;
-    *observability_s += Seconds(t_obs2);
+    outcome = refit_without_left_out(params, decision.measured);
+    iterations += outcome.iterations;
+    update_fisher(params, decision.measured);
   }
-  const ParameterVector std_dev = PosteriorStdDev(fisher, decision.measured, context, options.observability);
 
+  // Relative RMS residual (unweighted) and mean base colour over the samples.
+  auto summarise = [&](const ParameterVector& p, const ParameterMask& free, Eigen::Vector3d* mean_color) {
+    Eigen::Vector3d color_sum = Eigen::Vector3d::Zero();
+    double err2 = 0.0, data2 = 0.0;
+    for (std::size_t i = 0; i < samples.pixels(); ++i) {
+      const auto obs = samples.pixel(i);
+      const Eigen::Vector3d c = SolveBaseColor(p, obs, Settings(options, p, free, samples.luminance_start[i]));
+      color_sum += c;
+      for (const LocalObservation& o : obs) {
+        err2 += (RenderLocal(p, c, o.light_local, o.view_local, o.irradiance) - o.rgb).squaredNorm();
+        data2 += o.rgb.squaredNorm();
+      }
+    }
+    if (mean_color != nullptr) *mean_color = color_sum / static_cast<double>(samples.pixels());
+    return data2 > 0.0 ? std::sqrt(err2 / data2) : 0.0;
+  };
+  fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+
+  // Metallic only when the data demand it: a poorly explained cluster is refitted with metallic
+  // free; that fit replaces the dielectric one if it explains the data (relative RMS residual
+  // within mismatch_relative_rms), chi^2 drops by more than default_rejection_chi2 and metallic is
+  // then measured. Observability is decided again for the new model.
+  const int metal = kMetallic;
+  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > options.mismatch_relative_rms) {
+    ParameterMask free = decision.measured;
+    free[metal] = true;
+    ParameterVector trial = params;
+    trial[metal] = kMetallicStart;
+    SolveOutcome metal_outcome = SolveCluster(samples, free, options, trial);
+    if (metal_outcome.usable) {
+      const double cost_now = SamplesCost(samples, samples.pixels(), params, options, residuals, decision.measured);
+      const double cost_metal = SamplesCost(samples, samples.pixels(), trial, options, residuals, free);
+      const ObservabilityContext dielectric_context = context;
+      const Matrix7 dielectric_fisher = fisher;
+      ObservabilityDecision metal_decision = decide(trial, free);
+      const double gain = EffectiveChi2Increase(cost_metal, cost_now, context, options.observability);
+      // Demanded = the metallic model explains the data (not merely a better misfit).
+      const bool explains = summarise(trial, free, nullptr) <= options.mismatch_relative_rms;
+      if (explains && gain > options.observability.default_rejection_chi2 && metal_decision.measured[metal]) {
+        params = trial;
+        iterations += metal_outcome.iterations;
+        if (metal_decision.measured != free) {
+          metal_outcome = refit_without_left_out(params, metal_decision.measured);
+          iterations += metal_outcome.iterations;
+          update_fisher(params, metal_decision.measured);
+        }
+        char buffer[160];
+        std::snprintf(buffer, sizeof buffer, "demanded by the data: chi^2 -%.3g with metallic free", gain);
+        metal_decision.reason[metal] = buffer;
+        decision = metal_decision;
+        outcome = metal_outcome;
+        fit.rms_relative_residual = summarise(params, decision.measured, &fit.mean_base_color);
+      } else {
+        context = dielectric_context;  // keep the dielectric fit's figures
+        fisher = dielectric_fisher;
+      }
+    }
+  }
+
+  const ParameterVector std_dev = PosteriorStdDev(fisher, decision.measured, context, options.observability);
   fit.initial_cost = first.initial_cost;
   fit.final_cost = outcome.final_cost;
-  fit.iterations = first.iterations + (decision.measured != candidates ? outcome.iterations : 0);
-  fit.converged = first.converged && outcome.converged;
+  fit.iterations = iterations;
+  fit.converged = outcome.converged;  // the final solve is what counts
   fit.message = outcome.message;
-  if (!first.converged && outcome.converged) fit.converged = true;  // the final solve is what counts
   for (int i = 0; i < kFitParameterCount; ++i) {
     ParameterEstimate& e = fit.parameters[i];
     e.value = params[i];
     e.measured = decision.measured[i];
     e.std_dev = e.measured ? std_dev[i] : std::numeric_limits<double>::infinity();
-    e.reason = decision.reason[i];  // for a measured parameter only the "weakly constrained" note
+    e.reason = decision.reason[i];  // for a measured parameter only a "weakly constrained" / "demanded" note
   }
-
-  // Mean base colour and relative RMS residual (unweighted) over the samples.
-  Eigen::Vector3d color_sum = Eigen::Vector3d::Zero();
-  double err2 = 0.0, data2 = 0.0;
-  for (std::size_t p = 0; p < samples.pixels(); ++p) {
-    const auto obs = samples.pixel(p);
-    const Eigen::Vector3d c =
-        SolveBaseColor(params, obs, Settings(options, params, decision.measured, samples.luminance_start[p]));
-    color_sum += c;
-    for (const LocalObservation& o : obs) {
-      const Eigen::Vector3d pred = RenderLocal(params, c, o.light_local, o.view_local, o.irradiance);
-      err2 += (pred - o.rgb).squaredNorm();
-      data2 += o.rgb.squaredNorm();
-    }
-  }
-  fit.mean_base_color = color_sum / static_cast<double>(samples.pixels());
-  fit.rms_relative_residual = data2 > 0.0 ? std::sqrt(err2 / data2) : 0.0;
   return fit;
 }
 
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
 // cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
 // residual buffers come from the caller. Returns which parameters were kept.
+// `color` receives the closed-form base colour at the returned parameters (saves a solve).
 int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
                 double luminance_start, const ParameterVector& cluster, ParameterVector& params,
-                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac) {
+                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color) {
   int index[kMaxPixelParameters];
   int k = 0;
   if (measured[kRoughness]) index[k++] = kRoughness;
-  if (measured[kSpecular]) index[k++] = kSpecular;
-  if (k == 0) return 0;
+  if (measured[kSpecular] && options.refine_specular_per_pixel) index[k++] = kSpecular;
+  const PixelCostSettings settings = Settings(options, cluster, measured, luminance_start);
+  if (k == 0) {
+    *color = SolveBaseColor(params, obs, settings);
+    return 0;
+  }
   const std::size_t m = 3 * obs.size();
   r0.resize(m);
   r1.resize(m);
   jac.resize(m * k);
-  const PixelCostSettings settings = Settings(options, cluster, measured, luminance_start);
   const double prior_w = 1.0 / (options.pixel_prior_std * options.pixel_prior_std);
-  auto total = [&](const ParameterVector& p, std::vector<double>& r) {
-    double c = PixelResiduals(p, obs, settings, r.data());
+  auto total = [&](const ParameterVector& p, std::vector<double>& r, Eigen::Vector3d* c_out) {
+    double c = PixelResiduals(p, obs, settings, r.data(), c_out);
     for (int a = 0; a < k; ++a) c += 0.5 * prior_w * (p[index[a]] - cluster[index[a]]) * (p[index[a]] - cluster[index[a]]);
     return c;
   };
-  Eigen::Matrix<double, kMaxPixelParameters, kMaxPixelParameters> h;
-  double cost = total(params, r0);
+  // Fixed-size normal equations (no allocation per pixel); unused rows are identity.
+  using Matrix2 = Eigen::Matrix<double, kMaxPixelParameters, kMaxPixelParameters>;
+  using Vector2 = Eigen::Matrix<double, kMaxPixelParameters, 1>;
+  Matrix2 h = Matrix2::Identity();
+  double cost = total(params, r0, color);
+  const ParameterVector start = params;
+  const Eigen::Vector3d start_color = *color;
   for (int it = 0; it < options.pixel_iterations; ++it) {
     for (int a = 0; a < k; ++a) {
       ParameterVector q = params;
@@ -479,8 +554,8 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
       PixelResiduals(q, obs, settings, r1.data());
       for (std::size_t i = 0; i < m; ++i) jac[a * m + i] = (r1[i] - r0[i]) / step;
     }
-    h.setZero();
-    Eigen::Matrix<double, kMaxPixelParameters, 1> g = Eigen::Matrix<double, kMaxPixelParameters, 1>::Zero();
+    h.setIdentity();
+    Vector2 g = Vector2::Zero();
     for (int a = 0; a < k; ++a) {
       for (int b = 0; b <= a; ++b) {
         double s = 0.0;
@@ -492,16 +567,22 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
       g(a) = s + prior_w * (params[index[a]] - cluster[index[a]]);
       h(a, a) += prior_w;
     }
-    const auto hk = h.topLeftCorner(k, k);
-    const Eigen::VectorXd delta = -hk.ldlt().solve(g.head(k));
+    // No step where even the best case cannot pin the value down (cheap stage: skip early).
+    const Matrix2 covariance = h.inverse();
+    bool supported = false;
+    for (int a = 0; a < k; ++a) supported = supported || std::sqrt(std::max(0.0, covariance(a, a))) < options.pixel_max_std;
+    if (!supported) break;
+    const Vector2 delta = -h.ldlt().solve(g);
     if (!delta.allFinite()) break;
     // Step halving keeps the damped step a descent step.
     bool accepted = false;
-    for (double scale = 1.0; scale > 0.1 && !accepted; scale *= 0.5) {
+    for (double scale = 1.0; scale > kMinStepScale && !accepted; scale *= 0.5) {
       ParameterVector q = params;
       for (int a = 0; a < k; ++a) q[index[a]] = std::clamp(q[index[a]] + scale * delta(a), 0.0, 1.0);
-      const double c = total(q, r1);
+      Eigen::Vector3d c_color;
+      const double c = total(q, r1, &c_color);
       if (c < cost) {
+        *color = c_color;
         params = q;
         cost = c;
         std::swap(r0, r1);
@@ -511,7 +592,7 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     if (!accepted) break;
   }
   // Keep a refined value only where the pixel's own data pins it down.
-  const Eigen::MatrixXd covariance = h.topLeftCorner(k, k).inverse();
+  const Matrix2 covariance = h.inverse();  // h of the last linearisation (identity rows unused)
   int kept = 0;
   for (int a = 0; a < k; ++a) {
     const double sd = std::sqrt(std::max(0.0, covariance(a, a)));
@@ -520,6 +601,11 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     } else {
       params[index[a]] = cluster[index[a]];
     }
+  }
+  if (kept < k && params != start) {
+    *color = SolveBaseColor(params, obs, settings);  // a partial revert changes the colour
+  } else if (params == start) {
+    *color = start_color;
   }
   return kept;
 }
@@ -559,7 +645,7 @@ bool FitOptions::Check() const {
   return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
-         pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
+         mismatch_relative_rms > 0.0 && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
          pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0;
 }
 
@@ -649,6 +735,15 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
       LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
     }
+    if (c.rms_relative_residual > options.mismatch_relative_rms) {
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
+                    "not explain these pixels; expect biased parameters)",
+                    c.id, c.rms_relative_residual, options.mismatch_relative_rms);
+      result.convergence.messages.push_back(buffer);
+      LogWarning() << "fitting: " << buffer;
+    }
   }
 
   // Which maps exist: a parameter measured in at least one cluster (elsewhere it holds its default).
@@ -707,15 +802,16 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         ++local_fitted;
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
         ParameterVector params = cluster_params[c];
+        Eigen::Vector3d color;
         if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
           if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
-                          jac) > 0) {
+                          jac, &color) > 0) {
             ++local_refined;
           }
+        } else {
+          color = SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
         }
-        const Eigen::Vector3d color =
-            SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
         for (int ch = 0; ch < 3; ++ch) {
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
           result.base_color.at(ch, row, col) = static_cast<float>(v);

@@ -13,8 +13,8 @@
 //   4. observability: parameters the capture does not constrain are left out (U3M default, no
 //                     texture) and the cluster refitted without them (fitting/observability.h);
 //   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
-//                     enough information, roughness and specular are refined by a few damped
-//                     Gauss-Newton steps regularised toward the cluster value. No Ceres problem per
+//                     enough information, roughness (optionally specular) is refined by a damped
+//                     Gauss-Newton step regularised toward the cluster value. No Ceres problem per
 //                     pixel, no allocation per pixel.
 
 #include <Eigen/Core>
@@ -55,19 +55,31 @@ struct FitOptions {
   bool fit_sheen_tint = true;
   bool fit_anisotropic = true;
   bool fit_metallic = false;
+  // With fit_metallic off, a cluster the model explains poorly (mismatch_relative_rms) is refitted
+  // with metallic free, and metallic is kept only if the metallic model then explains the data
+  // (see docs/fitting.md).
+  bool metallic_if_demanded = true;
   // Ceres.
   int max_iterations = 100;
-  double function_tolerance = 1e-10;
+  double function_tolerance = 1e-8;
   double parameter_tolerance = 1e-10;
   double gradient_tolerance = 1e-12;
   // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
   int luminance_passes = 4;
-  // Per-pixel refinement of roughness and specular.
+  // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
+  // the convergence messages (the Principled model does not explain its data).
+  double mismatch_relative_rms = 0.05;
+  // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
+  // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
+  // Gauss-Newton iteration, 2 more with specular.
   bool refine_per_pixel = true;
+  bool refine_specular_per_pixel = false;
   double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
   double pixel_max_std = 0.05;       // a pixel's value is kept only if its posterior std is below this
-  double pixel_min_specular_fraction = 0.1;  // screen: some observation's specular share must exceed this
-  int pixel_iterations = 3;
+  // Screen: a pixel is refined only if its largest reflectance ratio exceeds its median one by
+  // 1 / (1 - this), i.e. it shows a highlight of at least this share.
+  double pixel_min_specular_fraction = 0.1;
+  int pixel_iterations = 1;
   // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
 
   bool Check() const;
@@ -116,7 +128,7 @@ struct StageTimes {
 struct ConvergenceReport {
   bool all_converged = true;
   int clusters_failed = 0;              // not converged or numerically failed
-  std::vector<std::string> messages;    // one line per problem, empty when all is well
+  std::vector<std::string> messages;    // one line per problem or mismatch warning, empty when all is well
   std::int64_t pixels_fitted = 0;       // pixels with enough observations
   std::int64_t pixels_refined = 0;      // pixels whose own roughness / specular were kept
 };

@@ -8,6 +8,7 @@
 #include <unsupported/Eigen/FFT>
 #include <vector>
 
+#include "core/logging.h"
 #include "core/parallel.h"
 
 namespace u3mscan::reconstruction {
@@ -23,17 +24,81 @@ Integrator ParseIntegrator(const std::string& name) {
 bool IntegrationOptions::Check() const {
   return pitch_mm >= 0.0 && std::isfinite(pitch_mm) && min_normal_z > 0.0 && min_normal_z < 1.0 &&
          std::isfinite(mean_height_mm) && robust_iterations >= 0 && min_residual_slope > 0.0 &&
-         min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && max_cg_iterations > 0;
+         min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && robust_round_cg_tolerance > 0.0 &&
+         settled_edge_fraction >= 0.0 && max_cg_iterations > 0;
 }
 
 namespace {
+
+// Complex FFT of one length. Eigen's FFT (kissfft) is fast for lengths made of small primes but
+// O(n p) for a large prime factor p; such lengths (e.g. 3543 = 3 x 1181 pixels) go through
+// Bluestein's chirp-z algorithm: a circular convolution of power-of-two length >= 2n - 1.
+class ComplexFft {
+ public:
+  explicit ComplexFft(int n) : n_(n) {
+    if (LargestPrimeFactor(n) <= kSmallPrime) return;
+    m_ = 1;
+    while (m_ < 2 * n - 1) m_ *= 2;
+    chirp_.resize(n);
+    for (int k = 0; k < n; ++k) {
+      // exp(-i pi k^2 / n), with k^2 reduced mod 2n so the angle stays exact for long lines.
+      const long long k2 = (static_cast<long long>(k) * k) % (2LL * n);
+      chirp_[k] = std::polar(1.0, -std::numbers::pi * static_cast<double>(k2) / n);
+    }
+    std::vector<std::complex<double>> b(m_, 0.0);
+    b[0] = std::conj(chirp_[0]);
+    for (int k = 1; k < n; ++k) b[k] = b[m_ - k] = std::conj(chirp_[k]);
+    kernel_.resize(m_);
+    fft_.fwd(kernel_.data(), b.data(), m_);
+    work_.resize(m_);
+    spectrum_.resize(m_);
+  }
+
+  void Forward(std::complex<double>* out, const std::complex<double>* in) {
+    if (m_ == 0) {
+      fft_.fwd(out, in, n_);
+      return;
+    }
+    std::fill(work_.begin(), work_.end(), 0.0);
+    for (int k = 0; k < n_; ++k) work_[k] = in[k] * chirp_[k];
+    fft_.fwd(spectrum_.data(), work_.data(), m_);
+    for (int k = 0; k < m_; ++k) spectrum_[k] *= kernel_[k];
+    fft_.inv(work_.data(), spectrum_.data(), m_);
+    for (int k = 0; k < n_; ++k) out[k] = work_[k] * chirp_[k];
+  }
+
+  // Inverse with 1/n scaling, through the forward transform of the conjugate.
+  void Inverse(std::complex<double>* out, const std::complex<double>* in) {
+    if (m_ == 0) {
+      fft_.inv(out, in, n_);
+      return;
+    }
+    for (int k = 0; k < n_; ++k) out[k] = std::conj(in[k]);
+    Forward(out, out);
+    for (int k = 0; k < n_; ++k) out[k] = std::conj(out[k]) / static_cast<double>(n_);
+  }
+
+ private:
+  static constexpr int kSmallPrime = 13;
+  static int LargestPrimeFactor(int n) {
+    int largest = 1;
+    for (int p = 2; static_cast<long long>(p) * p <= n; ++p)
+      while (n % p == 0) largest = p, n /= p;
+    return std::max(largest, n);
+  }
+
+  int n_;
+  int m_ = 0;  // Bluestein length; 0 = direct
+  Eigen::FFT<double> fft_;
+  std::vector<std::complex<double>> chirp_, kernel_, work_, spectrum_;
+};
 
 // DCT-II / its inverse along one line of length n via a complex FFT of length n (Makhoul 1980):
 // v = (x0, x2, x4, ..., x5, x3, x1), X_k = Re(exp(-i pi k / 2n) FFT(v)_k). Buffers are allocated
 // once per plan, so a plan serves every line of a chunk without allocation.
 class DctPlan {
  public:
-  explicit DctPlan(int n) : n_(n), in_(n), out_(n), twiddle_(n) {
+  explicit DctPlan(int n) : n_(n), fft_(n), in_(n), out_(n), twiddle_(n) {
     for (int k = 0; k < n; ++k) twiddle_[k] = std::polar(1.0, -std::numbers::pi * k / (2.0 * n));
   }
 
@@ -42,7 +107,7 @@ class DctPlan {
     const int half = (n_ + 1) / 2;
     for (int i = 0; i < half; ++i) in_[i] = x[2 * i];
     for (int i = 0; 2 * i + 1 < n_; ++i) in_[n_ - 1 - i] = x[2 * i + 1];
-    fft_.fwd(out_.data(), in_.data(), n_);
+    fft_.Forward(out_.data(), in_.data());
     for (int k = 0; k < n_; ++k) x[k] = (twiddle_[k] * out_[k]).real();
   }
 
@@ -53,7 +118,7 @@ class DctPlan {
       const double x_mirror = k == 0 ? 0.0 : x[n_ - k];
       in_[k] = std::conj(twiddle_[k]) * std::complex<double>(x[k], -x_mirror);
     }
-    fft_.inv(out_.data(), in_.data(), n_);
+    fft_.Inverse(out_.data(), in_.data());
     const int half = (n_ + 1) / 2;
     for (int i = 0; i < half; ++i) x[2 * i] = out_[i].real();
     for (int i = 0; 2 * i + 1 < n_; ++i) x[2 * i + 1] = out_[n_ - 1 - i].real();
@@ -61,7 +126,7 @@ class DctPlan {
 
  private:
   int n_;
-  Eigen::FFT<double> fft_;
+  ComplexFft fft_;
   std::vector<std::complex<double>> in_, out_, twiddle_;
 };
 
@@ -248,17 +313,72 @@ int SolvePcg(const EdgeField& e, const PoissonDctSolver& precond, const std::vec
   return it;
 }
 
-// Median of |x| over a bounded subsample (at most ~1M values), for the robust residual scale.
-double MedianAbs(const std::vector<float>& values) {
+// Median of |x| (reorders the values), for the robust residual scale.
+double MedianAbs(std::vector<float>& values) {
   if (values.empty()) return 0.0;
-  constexpr std::size_t kMaxSamples = 1u << 20;
-  const std::size_t stride = std::max<std::size_t>(1, values.size() / kMaxSamples);
-  std::vector<float> sample;
-  sample.reserve(values.size() / stride + 1);
-  for (std::size_t i = 0; i < values.size(); i += stride) sample.push_back(std::fabs(values[i]));
-  auto mid = sample.begin() + sample.size() / 2;
-  std::nth_element(sample.begin(), mid, sample.end());
+  for (float& v : values) v = std::fabs(v);
+  auto mid = values.begin() + values.size() / 2;
+  std::nth_element(values.begin(), mid, values.end());
   return *mid;
+}
+
+// 2x2 block means: normals (weighted by the mask, renormalised) and mask; the pitch doubles.
+void Downsample(const Image& normal, const Image& mask, double pitch_mm, Image* coarse_normal, Image* coarse_mask) {
+  const int w = normal.width(), h = normal.height();
+  const int cw = (w + 1) / 2, ch = (h + 1) / 2;
+  const std::size_t n = normal.pixel_count(), cn = static_cast<std::size_t>(cw) * ch;
+  *coarse_normal = Image(cw, ch, 3, 0.0f, 2.0 * pitch_mm);
+  *coarse_mask = Image(cw, ch, 1, 0.0f, 2.0 * pitch_mm);
+  ParallelFor(ch, [&](std::size_t r0, std::size_t r1) {
+    for (std::size_t cr = r0; cr < r1; ++cr)
+      for (int cc = 0; cc < cw; ++cc) {
+        double sum[3] = {0, 0, 0}, wsum = 0.0;
+        int count = 0;
+        for (int dr = 0; dr < 2; ++dr)
+          for (int dc = 0; dc < 2; ++dc) {
+            const int r = 2 * static_cast<int>(cr) + dr, c = 2 * cc + dc;
+            if (r >= h || c >= w) continue;
+            ++count;
+            const std::size_t i = static_cast<std::size_t>(r) * w + c;
+            double wt = mask.empty() ? 1.0 : mask.data()[i];
+            const double v[3] = {normal.data()[i], normal.data()[n + i], normal.data()[2 * n + i]};
+            if (!(wt > 0.0) || !std::isfinite(v[0] + v[1] + v[2])) continue;
+            wt = std::min(wt, 1.0);
+            for (int k = 0; k < 3; ++k) sum[k] += wt * v[k];
+            wsum += wt;
+          }
+        const std::size_t j = cr * cw + cc;
+        const double len = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
+        if (wsum > 0.0 && len > 0.0) {
+          for (int k = 0; k < 3; ++k) coarse_normal->data()[k * cn + j] = static_cast<float>(sum[k] / len);
+          coarse_mask->data()[j] = static_cast<float>(wsum / count);
+        } else {
+          coarse_normal->data()[2 * cn + j] = 1.0f;
+        }
+      }
+  });
+}
+
+// Bilinear upsampling of coarse heights onto the w x h grid (fine pixel c sits at coarse c/2 - 1/4).
+void Upsample(const Image& coarse, int w, int h, std::vector<double>& z) {
+  const int cw = coarse.width(), ch = coarse.height();
+  auto at = [&](int r, int c) {
+    return static_cast<double>(coarse.data()[static_cast<std::size_t>(std::clamp(r, 0, ch - 1)) * cw + std::clamp(c, 0, cw - 1)]);
+  };
+  ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
+    for (std::size_t r = r0; r < r1; ++r) {
+      const double y = 0.5 * static_cast<double>(r) - 0.25;
+      const int y0 = static_cast<int>(std::floor(y));
+      const double fy = y - y0;
+      for (int c = 0; c < w; ++c) {
+        const double x = 0.5 * c - 0.25;
+        const int x0 = static_cast<int>(std::floor(x));
+        const double fx = x - x0;
+        z[r * w + c] = (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
+                       fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+      }
+    }
+  });
 }
 
 }  // namespace
@@ -350,56 +470,94 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
   IntegrationResult result;
   const PoissonDctSolver dct(w, h);
   std::vector<double> z(n), b(n);
-  // Start: the exact unweighted solve (the whole answer for kDct without a mask).
-  BuildRightHandSide(e, /*unit_weights=*/true, b);
-  z = b;
-  dct.Solve(z);
-  ReportProgress(progress, "integration", 0.1);
-  if (!all_unit) {
+  const bool coarse_start = options.method == Integrator::kRobust && options.multiscale &&
+                            std::min(w, h) >= 2 * IntegrationOptions::kCoarsestSide;
+  if (coarse_start) {
+    // Coarse to fine: the robust solve of the half-size map puts the discontinuities in place, so
+    // the rounds here only sharpen them (a cut found by reweighting alone grows a few pixels per
+    // round).
+    Image coarse_normal, coarse_mask;
+    Downsample(normal, mask, pitch_mm, &coarse_normal, &coarse_mask);
+    IntegrationOptions coarse_options = options;
+    coarse_options.pitch_mm = 2.0 * pitch_mm;
+    const IntegrationResult coarse = IntegrateNormals(coarse_normal, coarse_mask, coarse_options);
+    result.cg_iterations += coarse.cg_iterations;
+    Upsample(coarse.height_mm, w, h, z);
+    ReportProgress(progress, "integration", 0.25);
+  } else {
+    // Start: the exact unweighted solve (the whole answer for kDct without a mask).
+    BuildRightHandSide(e, /*unit_weights=*/true, b);
+    z = b;
+    dct.Solve(z);
+    ReportProgress(progress, "integration", 0.1);
+  }
+  if (!all_unit && !coarse_start) {
     BuildRightHandSide(e, false, b);
     RemoveMean(b);
     result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
                                      &result.relative_residual);
   }
 
-  std::vector<float> robust_x(n, 1.0f), robust_y(n, 1.0f);
+  // Robust weights per edge; left empty (all 1) for kDct.
+  std::vector<float> robust_x, robust_y;
   if (options.method == Integrator::kRobust) {
-    std::vector<float> residuals;
-    residuals.reserve(2 * n);
+    robust_x.assign(n, 1.0f);
+    robust_y.assign(n, 1.0f);
+    // The residual scale from a bounded sample of the in-region edges (every stride-th pixel), so
+    // no plane of residuals is stored; the weights are then updated in parallel over rows.
+    constexpr std::size_t kMaxSamples = 1u << 20;
+    const std::size_t stride = std::max<std::size_t>(1, 2 * n / kMaxSamples);
+    std::vector<float> sample;
+    sample.reserve(2 * n / stride + 2);
+    // Per row: edges whose weight moved by more than kWeightStep this round.
+    constexpr float kWeightStep = 0.01f;
+    std::vector<std::size_t> row_changed(h);
     for (int round = 0; round < options.robust_iterations; ++round) {
-      residuals.clear();
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c) {
-          const std::size_t i = static_cast<std::size_t>(r) * w + c;
-          if (c + 1 < w && e.base_x[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + 1] - z[i] - e.target_x[i]));
-          if (r + 1 < h && e.base_y[i] > 0.0f) residuals.push_back(static_cast<float>(z[i + w] - z[i] - e.target_y[i]));
-        }
-      const double sigma = std::max(kMadToSigma * MedianAbs(residuals), options.min_residual_slope * pitch_mm);
-      double max_change = 0.0;
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c) {
-          const std::size_t i = static_cast<std::size_t>(r) * w + c;
-          if (c + 1 < w) {
-            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
-            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_x[i])));
-            robust_x[i] = rw;
-            e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
+      sample.clear();
+      for (std::size_t i = 0; i < n; i += stride) {
+        const int r = static_cast<int>(i / w), c = static_cast<int>(i % w);
+        if (c + 1 < w && e.base_x[i] > 0.0f) sample.push_back(static_cast<float>(z[i + 1] - z[i] - e.target_x[i]));
+        if (r + 1 < h && e.base_y[i] > 0.0f) sample.push_back(static_cast<float>(z[i + w] - z[i] - e.target_y[i]));
+      }
+      const double sigma = std::max(kMadToSigma * MedianAbs(sample), options.min_residual_slope * pitch_mm);
+      ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
+        for (std::size_t rr = r0; rr < r1; ++rr) {
+          const int r = static_cast<int>(rr);
+          std::size_t changed = 0;
+          for (int c = 0; c < w; ++c) {
+            const std::size_t i = static_cast<std::size_t>(r) * w + c;
+            if (c + 1 < w) {
+              const float rw = static_cast<float>(RobustWeight(options.loss, z[i + 1] - z[i] - e.target_x[i], sigma));
+              changed += std::fabs(rw - robust_x[i]) > kWeightStep;
+              robust_x[i] = rw;
+              e.weight_x[i] = std::max(e.base_x[i] * rw, min_w);
+            }
+            if (r + 1 < h) {
+              const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
+              changed += std::fabs(rw - robust_y[i]) > kWeightStep;
+              robust_y[i] = rw;
+              e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
+            }
           }
-          if (r + 1 < h) {
-            const float rw = static_cast<float>(RobustWeight(options.loss, z[i + w] - z[i] - e.target_y[i], sigma));
-            max_change = std::max(max_change, static_cast<double>(std::fabs(rw - robust_y[i])));
-            robust_y[i] = rw;
-            e.weight_y[i] = std::max(e.base_y[i] * rw, min_w);
-          }
+          row_changed[rr] = changed;
         }
+      });
+      std::size_t changed = 0;
+      for (std::size_t c : row_changed) changed += c;
       ++result.robust_iterations;
-      if (round > 0 && max_change < 1e-3) break;  // weights settled: the last solve stands
+      // Weights settled (at most 1e-4 of the edges still moving): the final solve follows.
+      if (round > 0 && static_cast<double>(changed) <= options.settled_edge_fraction * 2.0 * static_cast<double>(n)) break;
       BuildRightHandSide(e, false, b);
       RemoveMean(b);
-      result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
-                                       &result.relative_residual);
-      ReportProgress(progress, "integration", 0.1 + 0.9 * (round + 1) / options.robust_iterations);
+      // Rounds only need heights good enough to reweigh; the last system is solved tightly below.
+      result.cg_iterations += SolvePcg(e, dct, b, z, std::max(options.cg_tolerance, options.robust_round_cg_tolerance),
+                                       options.max_cg_iterations, &result.relative_residual);
+      ReportProgress(progress, "integration", 0.1 + 0.85 * (round + 1) / options.robust_iterations);
     }
+    BuildRightHandSide(e, false, b);
+    RemoveMean(b);
+    result.cg_iterations += SolvePcg(e, dct, b, z, options.cg_tolerance, options.max_cg_iterations,
+                                     &result.relative_residual);
   }
 
   // Anchor: mean over the valid pixels.
@@ -419,12 +577,17 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
       out[i] = std::isfinite(v) ? static_cast<float>(v) : static_cast<float>(options.mean_height_mm);
       if (pixel_weight[i] <= 0.0f) continue;
       float cmin = 1.0f;
-      if (c + 1 < w && e.base_x[i] > 0.0f) cmin = std::min(cmin, robust_x[i]);
-      if (c > 0 && e.base_x[i - 1] > 0.0f) cmin = std::min(cmin, robust_x[i - 1]);
-      if (r + 1 < h && e.base_y[i] > 0.0f) cmin = std::min(cmin, robust_y[i]);
-      if (r > 0 && e.base_y[i - w] > 0.0f) cmin = std::min(cmin, robust_y[i - w]);
+      if (!robust_x.empty()) {
+        if (c + 1 < w && e.base_x[i] > 0.0f) cmin = std::min(cmin, robust_x[i]);
+        if (c > 0 && e.base_x[i - 1] > 0.0f) cmin = std::min(cmin, robust_x[i - 1]);
+        if (r + 1 < h && e.base_y[i] > 0.0f) cmin = std::min(cmin, robust_y[i]);
+        if (r > 0 && e.base_y[i - w] > 0.0f) cmin = std::min(cmin, robust_y[i - w]);
+      }
       conf[i] = cmin * pixel_weight[i];
     }
+  LogDebug() << "integration " << IntegratorName(options.method) << " " << w << "x" << h << ": "
+             << result.robust_iterations << " robust rounds, " << result.cg_iterations
+             << " CG iterations (incl. coarser levels), relative residual " << result.relative_residual;
   ReportProgress(progress, "integration", 1.0);
   return result;
 }

@@ -14,10 +14,12 @@
 //    leaving the valid region are cut and the system is solved by conjugate gradients
 //    preconditioned with the same DCT solve.
 //  - kRobust: IRLS on the edge residuals with a Cauchy or Tukey weight, each weighted system solved
-//    matrix-free by DCT-preconditioned conjugate gradients. Edges that disagree with the surface
-//    (discontinuities: fabric edges, tears, holes, wrong normals) lose their weight, so a jump stays
-//    where it is instead of being spread over the map.
-// Memory: no matrices; about 4 float and 6 double planes of the map size (36 MP: ~2.3 GB).
+//    matrix-free by DCT-preconditioned conjugate gradients, coarse to fine. Edges that disagree with
+//    the surface (discontinuities: fabric edges, tears, holes, wrong normals) lose their weight, so
+//    a jump stays where it is instead of being spread over the map.
+// Memory: no matrices. kDct without mask: 7 float and 2 double planes of the map size; a mask adds
+// 4 double planes (CG), kRobust 2 more float planes (robust weights) and its coarser levels (1/3
+// more). 36 MP DCT: ~1.6 GB plus input and output.
 
 #include <string>
 
@@ -47,13 +49,22 @@ struct IntegrationOptions {
   // sigma = max(1.4826 * median |edge residual|, min_residual_slope * pitch_mm), so that
   // noise-free smooth surfaces (residuals ~ 0) keep unit weights.
   RobustLoss loss = RobustLoss::kCauchy;
-  int robust_iterations = 12;
+  int robust_iterations = 30;
+  // kRobust on maps of at least 2 * kCoarsestSide pixels a side: start from the robust solution
+  // of the 2x2-averaged map (recursively), upsampled; without it a cut grows a few pixels per round.
+  bool multiscale = true;
+  static constexpr int kCoarsestSide = 64;
   double min_residual_slope = 0.02;
+  // The rounds stop when at most this fraction of the edges changed weight by more than 0.01.
+  double settled_edge_fraction = 1e-4;
   // No edge weight goes below this (keeps the system connected and conditioned).
   double min_edge_weight = 1e-4;
 
   // Conjugate gradients: stop at this relative residual |b - Az| / |b| or this many iterations.
+  // The reweighting rounds of kRobust stop at the looser robust_round_cg_tolerance (their heights
+  // only set the next weights); the final system is solved to cg_tolerance.
   double cg_tolerance = 1e-7;
+  double robust_round_cg_tolerance = 1e-4;
   int max_cg_iterations = 400;
 
   bool Check() const;

@@ -1,6 +1,8 @@
 #include "reconstruction/photometric_stereo.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -48,6 +50,10 @@ namespace {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
+// Albedo values are clamped to this (a physical reflectance is <= 1; anything near this bound
+// comes from broken input such as a near-zero measured irradiance).
+constexpr double kMaxAlbedo = 1e6;
+
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
   kDark = 1u << 0,
@@ -64,6 +70,7 @@ struct PixelObservation {
   double grey = 0.0;    // mean of rgb
   double inv_e = 0.0;   // 1 / E: residuals * inv_e are in shading units (rho / pi * cos)
   double weight = 0.0;  // current IRLS weight (0 = not used)
+  double previous_weight = 0.0;  // of the last accepted IRLS round
   bool candidate = false;
 };
 
@@ -82,7 +89,9 @@ struct PixelSystem {
   Matrix3d eigenvectors = Matrix3d::Identity();
   double weight_sum = 0.0;
 
-  void Build(const std::vector<PixelObservation>& obs) {
+  // decompose = false skips the eigen-decomposition (IRLS rounds solve with a Cholesky factor;
+  // only the final system needs eigenvalues for the condition number and the pseudo-inverse).
+  void Build(const std::vector<PixelObservation>& obs, bool decompose = true) {
     a.setZero();
     r.setZero();
     weight_sum = 0.0;
@@ -92,6 +101,10 @@ struct PixelSystem {
       r.noalias() += o.weight * o.s * o.rgb.transpose();
       weight_sum += o.weight;
     }
+    if (decompose) Decompose();
+  }
+
+  void Decompose() {
     Eigen::SelfAdjointEigenSolver<Matrix3d> es;
     es.computeDirect(a);
     eigenvalues = es.eigenvalues().cwiseMax(0.0);  // ascending
@@ -228,15 +241,25 @@ class Solver {
         // Attached shadow: the linear model predicts a negative value the camera cannot see.
         if (o.candidate && o.s.dot(bg) > 0.0) w = RobustWeight(options_.loss, residual(o), sigma);
         change = std::max(change, std::fabs(w - o.weight));
+        o.previous_weight = o.weight;
         o.weight = w;
       }
       PixelSystem next;
-      next.Build(obs);
-      if (!(next.eigenvalues(0) > 1e-12 * next.eigenvalues(2))) break;  // weights left < 3 lights: keep the last good system
-      sys = next;
-      b = sys.Solve();
-      if (change < 1e-4) break;
+      next.Build(obs, /*decompose=*/false);
+      // Weights left fewer than 3 independent lights: keep the last good system.
+      const Eigen::LLT<Matrix3d> llt(next.a);
+      const double scale = next.a.trace();
+      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) {
+        for (auto& o : obs) o.weight = o.previous_weight;  // weights and system stay consistent
+        break;
+      }
+      sys.a = next.a;
+      sys.r = next.r;
+      sys.weight_sum = next.weight_sum;
+      b = llt.solve(next.r);
+      if (change < 1e-3) break;
     }
+    sys.Decompose();
   }
 
   // Per-channel albedo for a fixed normal: rho_c = pi * sum w rgb_c m / sum w m^2, m = max(0, s.n).
@@ -340,73 +363,75 @@ class Solver {
   bool has_point_lights_ = false;
 };
 
-// Prior normal for each pixel from its reliable neighbours: confidence-weighted mean over the 3x3
-// neighbourhood, else push-pull over a pyramid (2x2 sums down, blend back up), +z when nothing
-// anywhere is reliable.
-Image NeighbourPrior(const Image& normal, const std::vector<float>& weight, int w, int h) {
+// Prior normal for the pixels that need one, from their reliable neighbours: the weighted mean
+// over the 3x3 neighbourhood, else push-pull over a pyramid (2x2 sums down, blend back up), +z when
+// nothing anywhere is reliable. Pyramid levels start at half size, in float: about 1.4 floats per
+// pixel beyond the output.
+Image NeighbourPrior(const Image& normal, const std::vector<float>& weight, const std::vector<std::uint8_t>& needs,
+                     int w, int h) {
+  const std::size_t n = static_cast<std::size_t>(w) * h;
   struct Level {
-    int w, h;
-    std::vector<double> n, wsum;  // n: 3 per pixel, weighted sums
+    int w = 0, h = 0;
+    std::vector<Eigen::Vector4f> sum;  // weighted normal (xyz) and weight (w)
   };
   std::vector<Level> levels;
-  Level l0{w, h, std::vector<double>(3 * static_cast<std::size_t>(w) * h, 0.0), std::vector<double>(static_cast<std::size_t>(w) * h, 0.0)};
-  for (std::size_t i = 0; i < l0.wsum.size(); ++i) {
-    l0.wsum[i] = weight[i];
-    for (int c = 0; c < 3; ++c) l0.n[3 * i + c] = weight[i] * normal.data()[c * l0.wsum.size() + i];
-  }
-  levels.push_back(std::move(l0));
-  while (levels.back().w > 1 || levels.back().h > 1) {
-    const Level& f = levels.back();
-    Level g{(f.w + 1) / 2, (f.h + 1) / 2, {}, {}};
-    g.n.assign(3 * static_cast<std::size_t>(g.w) * g.h, 0.0);
-    g.wsum.assign(static_cast<std::size_t>(g.w) * g.h, 0.0);
-    for (int r = 0; r < f.h; ++r)
-      for (int c = 0; c < f.w; ++c) {
-        const std::size_t i = static_cast<std::size_t>(r) * f.w + c, j = static_cast<std::size_t>(r / 2) * g.w + c / 2;
-        g.wsum[j] += f.wsum[i];
-        for (int k = 0; k < 3; ++k) g.n[3 * j + k] += f.n[3 * i + k];
+  auto level0 = [&](int r, int c) {
+    const std::size_t i = static_cast<std::size_t>(r) * w + c;
+    const float wt = weight[i];
+    return Eigen::Vector4f(wt * normal.data()[i], wt * normal.data()[n + i], wt * normal.data()[2 * n + i], wt);
+  };
+  int lw = w, lh = h;
+  while (lw > 1 || lh > 1) {
+    Level g;
+    g.w = (lw + 1) / 2, g.h = (lh + 1) / 2;
+    g.sum.assign(static_cast<std::size_t>(g.w) * g.h, Eigen::Vector4f::Zero());
+    for (int r = 0; r < lh; ++r)
+      for (int c = 0; c < lw; ++c) {
+        const Eigen::Vector4f v = levels.empty() ? level0(r, c) : levels.back().sum[static_cast<std::size_t>(r) * lw + c];
+        g.sum[static_cast<std::size_t>(r / 2) * g.w + c / 2] += v;
       }
+    lw = g.w, lh = g.h;
     levels.push_back(std::move(g));
   }
-  // Pull: filled value per level, coarse to fine.
-  std::vector<Vector3d> coarse(1, Vector3d::UnitZ());
-  {
-    const Level& top = levels.back();
-    if (top.wsum[0] > 0.0) coarse[0] = Vector3d(top.n[0], top.n[1], top.n[2]) / top.wsum[0];
-  }
-  for (int li = static_cast<int>(levels.size()) - 2; li >= 0; --li) {
+  // Pull, coarse to fine, down to level 1 (half size): filled value per pyramid pixel.
+  auto mean_of = [](const Eigen::Vector4f& v, const Eigen::Vector3f& fallback) {
+    const float a = std::min(1.0f, v(3));
+    return v(3) > 0.0f ? Eigen::Vector3f(a * v.head<3>() / v(3) + (1.0f - a) * fallback) : fallback;
+  };
+  std::vector<Eigen::Vector3f> coarse(1, Eigen::Vector3f::UnitZ());
+  int cw = 1;
+  for (int li = static_cast<int>(levels.size()) - 1; li >= 0; --li) {
     const Level& f = levels[li];
-    const int gw = levels[li + 1].w;
-    std::vector<Vector3d> filled(static_cast<std::size_t>(f.w) * f.h);
+    std::vector<Eigen::Vector3f> filled(f.sum.size());
     for (int r = 0; r < f.h; ++r)
       for (int c = 0; c < f.w; ++c) {
         const std::size_t i = static_cast<std::size_t>(r) * f.w + c;
-        const Vector3d& up = coarse[static_cast<std::size_t>(r / 2) * gw + c / 2];
-        const double a = std::min(1.0, f.wsum[i]);
-        filled[i] = f.wsum[i] > 0.0 ? Vector3d(a * Vector3d(f.n[3 * i], f.n[3 * i + 1], f.n[3 * i + 2]) / f.wsum[i] + (1.0 - a) * up) : up;
+        const Eigen::Vector3f& up = li + 1 == static_cast<int>(levels.size()) ? coarse[0] : coarse[static_cast<std::size_t>(r / 2) * cw + c / 2];
+        filled[i] = mean_of(f.sum[i], up);
       }
     coarse.swap(filled);
+    cw = f.w;
   }
   Image prior(w, h, 3, 0.0f, normal.pitch_mm());
-  const std::size_t n = static_cast<std::size_t>(w) * h;
   for (int r = 0; r < h; ++r)
     for (int c = 0; c < w; ++c) {
-      Vector3d sum = Vector3d::Zero();
-      double ws = 0.0;
-      for (int dr = -1; dr <= 1; ++dr)
-        for (int dc = -1; dc <= 1; ++dc) {
-          const int rr = r + dr, cc = c + dc;
-          if ((dr == 0 && dc == 0) || rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
-          const std::size_t j = static_cast<std::size_t>(rr) * w + cc;
-          if (weight[j] <= 0.0f) continue;
-          sum += weight[j] * Vector3d(normal.data()[j], normal.data()[n + j], normal.data()[2 * n + j]);
-          ws += weight[j];
-        }
-      Vector3d p = ws >= 0.5 ? Vector3d(sum / ws) : coarse[static_cast<std::size_t>(r) * w + c];
-      if (!(p.norm() > 1e-9) || !p.allFinite()) p = Vector3d::UnitZ();
-      p.normalize();
-      if (p.z() < 0.05) p = Vector3d::UnitZ();
-      for (int k = 0; k < 3; ++k) prior.data()[k * n + static_cast<std::size_t>(r) * w + c] = static_cast<float>(p(k));
+      const std::size_t i = static_cast<std::size_t>(r) * w + c;
+      Eigen::Vector3f p = Eigen::Vector3f::UnitZ();
+      if (needs[i]) {
+        Eigen::Vector4f sum = Eigen::Vector4f::Zero();
+        for (int dr = -1; dr <= 1; ++dr)
+          for (int dc = -1; dc <= 1; ++dc) {
+            const int rr = r + dr, cc = c + dc;
+            if ((dr == 0 && dc == 0) || rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
+            sum += level0(rr, cc);
+          }
+        const Eigen::Vector3f up = levels.empty() ? Eigen::Vector3f::UnitZ() : coarse[static_cast<std::size_t>(r / 2) * cw + c / 2];
+        p = sum(3) >= 0.5f ? Eigen::Vector3f(sum.head<3>() / sum(3)) : up;
+        if (!(p.norm() > 1e-6f) || !p.allFinite()) p = Eigen::Vector3f::UnitZ();
+        p.normalize();
+        if (p.z() < 0.05f) p = Eigen::Vector3f::UnitZ();
+      }
+      for (int k = 0; k < 3; ++k) prior.data()[k * n + i] = p(k);
     }
   return prior;
 }
@@ -449,7 +474,9 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   auto store = [&](std::size_t i, const PixelEstimate& est, const Vector3d& albedo) {
     for (int c = 0; c < 3; ++c) {
       res.normal.data()[c * n + i] = static_cast<float>(est.normal(c));
-      res.albedo.data()[c * n + i] = static_cast<float>(albedo(c));
+      // Garbage input (e.g. a near-zero irradiance) must not overflow the float map.
+      const double a = std::isfinite(albedo(c)) ? std::clamp(albedo(c), 0.0, kMaxAlbedo) : 0.0;
+      res.albedo.data()[c * n + i] = static_cast<float>(a);
     }
     res.confidence.data()[i] = static_cast<float>(est.confidence);
     res.condition_number.data()[i] = static_cast<float>(est.condition);
@@ -486,7 +513,9 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
     any_unreliable |= needs;
   }
   if (any_unreliable) {
-    const Image prior = NeighbourPrior(res.normal, reliable, w, h);
+    std::vector<std::uint8_t> needs(n);
+    for (std::size_t i = 0; i < n; ++i) needs[i] = (state[i] & (kDark | kIllConditioned | kLowAlbedo)) != 0;
+    const Image prior = NeighbourPrior(res.normal, reliable, needs, w, h);
     ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
       Scratch scratch(solver.observation_count());
       PixelSystem sys;

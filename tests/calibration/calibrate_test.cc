@@ -124,8 +124,7 @@ struct TinyCapture {
 
 CalibrationOptions TestOptions() {
   CalibrationOptions options;
-  options.chart_layout = {Eigen::Vector2d::Zero(), 10.0};
-  options.use_mcc = false;  // the known layout: mcc has its own test
+  options.use_mcc = false;  // the known layout, pitch searched: mcc has its own test
   return options;
 }
 

@@ -95,6 +95,19 @@ TEST(ColourCalibration, MccDetectorOrLayoutFindsTheSameChart) {
   }
 }
 
+TEST(ColourCalibration, UnknownPitchIsFoundFromTheColours) {
+  const CameraModel camera = testing::DownCamera(360, 270, 300.0, 90.0);
+  const ChartLayout layout{Eigen::Vector2d(0.0, 0.0), 11.0};
+  const Image frame = RenderChart(camera, layout);
+  const double pitch = FindChartPitchMm(frame, camera, layout.centre_mm);
+  std::cout << "measured: chart pitch searched " << pitch << " mm (truth 11 mm)\n";
+  EXPECT_NEAR(pitch, 11.0, 0.02 * 11.0);
+  const auto& reference = ClassicChartLinearSrgb();
+  const ColourFit fit = FitColourCorrection(ToReflectance(MeasureChartAtLayout(frame, camera, {layout.centre_mm, pitch}, "c")),
+                                            {reference.begin(), reference.end()});
+  EXPECT_LT(fit.delta_e_after_mean, kMaxMeanDeltaEAfter);
+}
+
 TEST(ColourCalibration, ChartOutsideTheViewNamesTheFrame) {
   const CameraModel camera = testing::DownCamera(160, 120, 300.0, 40.0);
   const ChartLayout layout{Eigen::Vector2d(0.0, 0.0), 12.0};  // 72 mm wide: larger than the view

@@ -71,8 +71,15 @@ TEST(PointLight, PositionFromTwoPlacementsWithinOnePercent) {
   }
   LightModel start;
   start.type = LightType::kPoint;
-  const LightFit fit = FitPointLight(observations, start);
+  start.position_in_world_mm = truth + Eigen::Vector3d(12.0, -8.0, 15.0);  // the manifest, 21 mm off
+  LightFitOptions no_prior;
+  no_prior.manifest_position_sigma_mm = 0.0;
+  const LightFit with_prior = FitPointLight(observations, start);
+  const LightFit fit = FitPointLight(observations, start, no_prior);
   const double distance = truth.norm();
+  std::cout << "measured: point light with a manifest prior 21 mm off: position error "
+            << (with_prior.model.position_in_world_mm - truth).norm() << " mm (" << with_prior.note << ")\n";
+  EXPECT_LT((with_prior.model.position_in_world_mm - truth).norm(), kMaxPositionErrorRelative * distance);
   std::cout << "measured: point light position error " << (fit.model.position_in_world_mm - truth).norm()
             << " mm at a distance of " << distance << " mm\n";
   EXPECT_LT((fit.model.position_in_world_mm - truth).norm(), kMaxPositionErrorRelative * distance)
@@ -89,7 +96,10 @@ TEST(PointLight, OnePlacementTakesTheDistanceFromTheManifest) {
   LightModel start;
   start.type = LightType::kPoint;
   start.position_in_world_mm = truth + Eigen::Vector3d(8.0, -6.0, 5.0);  // the manifest is a little off
-  const LightFit fit = FitPointLight({ObserveSphere(frame, camera, {kSphereRadiusMm, centre}, "s.tif", centre)}, start);
+  LightFitOptions no_prior;
+  no_prior.manifest_position_sigma_mm = 0.0;
+  const LightFit fit =
+      FitPointLight({ObserveSphere(frame, camera, {kSphereRadiusMm, centre}, "s.tif", centre)}, start, no_prior);
   EXPECT_LT((fit.model.position_in_world_mm - truth).norm(), kMaxPositionErrorRelative * truth.norm() + 10.0);
   EXPECT_FALSE(fit.note.empty());
 }

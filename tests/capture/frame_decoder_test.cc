@@ -289,6 +289,43 @@ TEST_F(FrameDecoder, RegionEqualsCropOfFullRead) {
   }
 }
 
+// A tiled float file (EXR or TIFF) with tiles that do not divide the image size.
+void WriteTiled(const Image& img, const fs::path& path, int tile) {
+  std::vector<float> pixels(img.pixel_count() * 3);
+  for (std::size_t i = 0; i < img.pixel_count(); ++i) {
+    for (int k = 0; k < 3; ++k) pixels[i * 3 + k] = img.plane(k)[i];
+  }
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  OIIO::ImageSpec spec(img.width(), img.height(), 3, OIIO::TypeDesc::FLOAT);
+  spec.tile_width = tile;
+  spec.tile_height = tile;
+  ASSERT_TRUE(out->supports("tiles"));
+  ASSERT_TRUE(out->open(path.string(), spec)) << out->geterror();
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
+  out->close();
+}
+
+TEST_F(FrameDecoder, TiledFilesReadOnlyTheirTilesAndMatchTheFullRead) {
+  constexpr int kTile = 48;  // TIFF tiles are multiples of 16; 64 = 48 + 16: edge tiles are partial
+  for (const char* name : {"tiled.exr", "tiled.tif"}) {
+    const fs::path path = dir_.path() / name;
+    WriteTiled(truth_, path, kTile);
+    ASSERT_GT(OIIO::ImageInput::open(path.string())->spec().tile_width, 0) << name;
+    const DecodedFrame full = DecodeFrame(path);
+    EXPECT_LE(MaxError(full.rgb, truth_), kHalfTolerance) << name;
+    for (const auto& [x, y, w, h] : {std::array<int, 4>{7, 13, 41, 35}, std::array<int, 4>{50, 60, 14, 4},
+                                     std::array<int, 4>{48, 0, 16, 64}}) {
+      const DecodedFrame part = DecodeFrameRegion(path, {}, x, y, w, h);
+      for (int r = 0; r < h; ++r) {
+        for (int c = 0; c < w; ++c) {
+          for (int k = 0; k < 3; ++k) ASSERT_EQ(part.rgb.at(k, r, c), full.rgb.at(k, y + r, x + c)) << name;
+        }
+      }
+    }
+  }
+}
+
 TEST_F(FrameDecoder, TextFileNamedDng) {
   const fs::path path = dir_.path() / "notes.dng";
   testing::WriteText(path, "this is not a raw file\n");

@@ -97,6 +97,23 @@ TEST_F(CaptureWriterTest, WrittenManifestPassesReadManifestWithEveryRole) {
   EXPECT_EQ(entries, 1);
 }
 
+TEST_F(CaptureWriterTest, ObliqueRigWithoutPosesPassesReadManifest) {
+  RigOptions options;
+  options.width = options.height = kSize;
+  rig_ = MakeRig("oblique", options);
+  CaptureOptions capture;
+  capture.format = FrameFormat::kExr;
+  capture.write_pose = false;
+  const fs::path dir = root_ / "oblique";
+  WriteSyntheticCapture(scene_, rig_, capture, dir);
+  const Manifest m = ReadManifest(dir / kCaptureSubdir);
+  ASSERT_EQ(m.cameras.size(), 2u);
+  int oblique_boards = 0;
+  for (const CameraSpec& c : m.cameras) EXPECT_FALSE(c.pose.has_value()) << c.id;
+  for (const FrameSpec& f : m.frames) oblique_boards += f.camera == "oblique" && f.role == FrameRole::kBoard;
+  EXPECT_EQ(oblique_boards, 1);
+}
+
 // libraw decodes the DNG (AHD demosaic) back to the renderer's values within the sensor's noise.
 TEST_F(CaptureWriterTest, DngDecodedByLibrawMatchesRendererValues) {
   const fs::path dir = Write("dng", FrameFormat::kDng);

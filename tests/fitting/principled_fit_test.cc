@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <iostream>
 #include <random>
 #include <set>
 
@@ -35,8 +37,8 @@ PrincipledParams<double> TwoFabrics(int col, int row, int width, bool with_sheen
   const double texture = 1.0 + 0.08 * std::sin(0.9 * col + 0.4 * row);
   if (col < width / 2) {
     p.base_color = Eigen::Vector3d(0.50, 0.48, 0.45) * texture;
-    p.roughness = 0.3;
-    p.specular = 0.5;
+    p.roughness = 0.33;  // off the start grid, so the solver has to move
+    p.specular = 0.55;
     p.sheen = with_sheen ? 0.6 : 0.0;
   } else {
     p.base_color = Eigen::Vector3d(0.60, 0.25, 0.10) * texture;
@@ -76,6 +78,22 @@ void ExpectRecovered(const Scene& scene, const FitResult& result, FitParameter p
   EXPECT_LT(worst, tolerance) << FitParameterName(parameter);
 }
 
+// Mean absolute error of a parameter over fitted pixels (left-out maps count with their value).
+double MeanAbsError(const Scene& scene, const FitResult& result, FitParameter parameter) {
+  const int width = scene.stack.grid.width;
+  const Image& map = result.map(parameter);
+  double sum = 0.0;
+  int n = 0;
+  for (std::size_t i = 0; i < scene.truth.size(); ++i) {
+    const int row = static_cast<int>(i / width), col = static_cast<int>(i % width);
+    if (result.cluster_id.at(0, row, col) < 0.0f) continue;
+    const double fitted = map.empty() ? result.report(parameter).value : map.at(0, row, col);
+    sum += std::abs(fitted - TruthValue(scene.truth[i], parameter));
+    ++n;
+  }
+  return n > 0 ? sum / n : 0.0;
+}
+
 void ExpectBaseColorRecovered(const Scene& scene, const FitResult& result) {
   const int width = scene.stack.grid.width;
   double worst = 0.0;
@@ -86,6 +104,11 @@ void ExpectBaseColorRecovered(const Scene& scene, const FitResult& result) {
     }
   }
   EXPECT_LT(worst, kExactColorTolerance);
+}
+
+// U3MSCAN_FIT_PRINT_JSON=1 prints each fit's report (docs/fitting.md quotes these figures).
+void MaybePrint(const char* name, const FitResult& result) {
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) std::cout << "== " << name << "\n" << FitResultToJson(result);
 }
 
 void ExpectFinite(const FitResult& result) {
@@ -123,6 +146,7 @@ TEST_F(PrincipledFitTest, OverheadRigRecoversEveryObservableLobeAndLeavesSheenOu
   const std::set<int> held_out = {2, 7, 13};
   const Stack fit_stack = WithoutLights(scene.stack, held_out);
   const FitResult result = FitPrincipled(fit_stack, scene.geometry, FitOptions());
+  MaybePrint("OverheadRigRecoversEveryObservableLobeAndLeavesSheenOut", result);
 
   ExpectFinite(result);
   EXPECT_TRUE(result.convergence.all_converged);
@@ -165,6 +189,7 @@ TEST_F(PrincipledFitTest, ObliqueViewRecoversSheen) {
   spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
   const Scene scene = MakeScene(spec);
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("ObliqueViewRecoversSheen", result);
 
   ExpectFinite(result);
   EXPECT_TRUE(result.convergence.all_converged);
@@ -177,9 +202,53 @@ TEST_F(PrincipledFitTest, ObliqueViewRecoversSheen) {
   ExpectBaseColorRecovered(scene, result);
 }
 
-TEST_F(PrincipledFitTest, UniformSampleGivesConstantMaps) {
+TEST_F(PrincipledFitTest, OverheadRigRecoversAnisotropy) {
+  // Satin-like: highlights stretched along the grid x axis (the tangent convention).
   SceneSpec spec;
   spec.lights_deg = OverheadLights();
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.3, 0.32, 0.5) * (1.0 + 0.05 * std::sin(1.3 * col - 0.5 * row));
+    p.roughness = 0.4;
+    p.specular = 0.7;
+    p.anisotropic = 0.6;
+    return p;
+  };
+  const Scene scene = MakeScene(spec);
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("OverheadRigRecoversAnisotropy", result);
+  ExpectFinite(result);
+  EXPECT_TRUE(result.report(FitParameter::kAnisotropic).measured);
+  for (FitParameter p : {FitParameter::kRoughness, FitParameter::kSpecular, FitParameter::kAnisotropic}) {
+    ExpectRecovered(scene, result, p, kExactParameterTolerance);
+  }
+}
+
+TEST_F(PrincipledFitTest, MetallicOnlyWhenTheDataDemandIt) {
+  // A metallic thread (gold-coloured, no diffuse): the dielectric fit cannot explain it, the
+  // metallic refit must. The fabric scenes above keep metallic at 0 ("not measured").
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.9, 0.65, 0.3) * (1.0 + 0.04 * std::sin(0.8 * col + row));
+    p.metallic = 1.0;
+    p.roughness = 0.35;
+    return p;
+  };
+  const Scene scene = MakeScene(spec);
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("MetallicOnlyWhenTheDataDemandIt", result);
+  ExpectFinite(result);
+  EXPECT_TRUE(result.report(FitParameter::kMetallic).measured) << result.report(FitParameter::kMetallic).reason;
+  ExpectRecovered(scene, result, FitParameter::kMetallic, kExactParameterTolerance);
+  ExpectRecovered(scene, result, FitParameter::kRoughness, kExactParameterTolerance);
+}
+
+TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.point_light_distance_mm = 30.0;  // near lights: direction and 1/d^2 vary over the 1.6 mm grid
   spec.material = [](int col, int row) {
     PrincipledParams<double> p;
     p.base_color = Eigen::Vector3d(0.4, 0.35, 0.3) * (1.0 + 0.05 * std::cos(0.7 * col * row));
@@ -189,6 +258,7 @@ TEST_F(PrincipledFitTest, UniformSampleGivesConstantMaps) {
   };
   const Scene scene = MakeScene(spec);
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("UniformSampleUnderPointLightsGivesConstantMaps", result);
   const MapReport& roughness = result.report(FitParameter::kRoughness);
   EXPECT_TRUE(roughness.measured);
   EXPECT_TRUE(roughness.constant) << roughness.reason;
@@ -217,7 +287,11 @@ TEST_F(PrincipledFitTest, BoundsAreRespectedOnDataBeyondTheModel) {
   for (Observation& o : scene.stack.observations) {
     for (float& v : o.rgb.data()) v *= noise(rng) * 1.05f;
   }
-  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  FitOptions options;
+  options.samples_per_cluster = 32;  // bounded noisy solves iterate long; keep the test fast
+  options.clustering.cluster_count = 2;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  MaybePrint("BoundsAreRespectedOnDataBeyondTheModel", result);
   ExpectFinite(result);
   for (const ClusterFit& c : result.clusters) {
     for (const ParameterEstimate& e : c.parameters) {
@@ -255,6 +329,7 @@ TEST_F(PrincipledFitTest, StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan) {
   }
   ASSERT_GT(saturated, 0u) << "the scene must contain flagged highlights";
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan", result);
   ExpectFinite(result);
   if (result.convergence.all_converged) {
     const MapReport& roughness = result.report(FitParameter::kRoughness);
@@ -281,6 +356,128 @@ TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
   FitOptions options;
   options.noise_relative = -1.0;
   EXPECT_THROW(FitPrincipled(scene.stack, scene.geometry, options), std::invalid_argument);
+}
+
+// The issue's accuracy targets on a capture with sensor-like noise: 1 % Gaussian per channel
+// (seeded), oblique rig, four lights held out of the fit.
+constexpr double kNoiseRelative = 0.01;
+constexpr double kTargetRoughnessError = 0.05;
+constexpr double kTargetSpecularError = 0.1;
+constexpr double kTargetSheenError = 0.1;
+// Held-out images compared with the noise-free truth: noise does not count against the fit.
+
+TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.oblique_view = true;
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
+  const Scene scene = MakeScene(spec);
+  const std::set<int> held_out = {1, 6, 11, 18};
+  Stack noisy = WithoutLights(scene.stack, held_out);
+  std::mt19937 rng(23);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(kNoiseRelative));
+  for (Observation& o : noisy.observations) {
+    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
+  }
+  FitOptions options;
+  options.samples_per_cluster = 48;  // noisy solves iterate long; keep the test fast
+  const FitResult result = FitPrincipled(noisy, scene.geometry, options);
+  MaybePrint("NoisyCaptureMeetsTheIssueTargets", result);
+  ExpectFinite(result);
+  const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
+  const double specular = MeanAbsError(scene, result, FitParameter::kSpecular);
+  const double sheen = MeanAbsError(scene, result, FitParameter::kSheen);
+  EXPECT_TRUE(result.report(FitParameter::kSheen).measured);
+  EXPECT_LT(roughness, kTargetRoughnessError);
+  EXPECT_LT(specular, kTargetSpecularError);
+  EXPECT_LT(sheen, kTargetSheenError);
+  double worst_rmse = 0.0;
+  for (const Observation& o : scene.stack.observations) {
+    if (!held_out.count(o.light)) continue;
+    const double rmse = RelativeRmse(RenderFitted(result, scene.stack, scene.geometry, o), o.rgb);
+    worst_rmse = std::max(worst_rmse, rmse);
+    if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) std::cout << "held-out view " << o.view << " light " << o.light << " rmse " << rmse << "\n";
+  }
+  EXPECT_LT(worst_rmse, kHeldOutRelativeRmse);
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "noisy: mean |error| roughness " << roughness << ", specular " << specular << ", sheen " << sheen
+              << ", specular_tint " << MeanAbsError(scene, result, FitParameter::kSpecularTint) << ", sheen_tint "
+              << MeanAbsError(scene, result, FitParameter::kSheenTint) << "; worst held-out relative RMSE "
+              << worst_rmse << "\n";
+  }
+}
+
+// Model mismatch (the issue asks for the same figures): the render's sheen is Charlie sheen, which
+// the Principled model cannot represent (it is visible even from overhead, where Disney sheen is
+// not). The figures are printed with U3MSCAN_FIT_PRINT_JSON=1 and quoted in docs/fitting.md; the
+// test checks that the fit stays finite and that the report flags the misfit instead of hiding it.
+constexpr double kMismatchFlagRelativeRms = 0.05;
+
+TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.oblique_view = true;
+  spec.model = testing::RenderModel::kCharlieSheen;
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
+  const Scene scene = MakeScene(spec);
+  const std::set<int> held_out = {1, 6, 11, 18};
+  FitOptions options;
+  options.samples_per_cluster = 48;  // misfit solves iterate long; keep the test fast
+  options.clustering.cluster_count = 4;
+  options.max_iterations = 40;
+  const FitResult result = FitPrincipled(WithoutLights(scene.stack, held_out), scene.geometry, options);
+  MaybePrint("ModelMismatchIsReported", result);
+  ExpectFinite(result);
+  EXPECT_FALSE(result.report(FitParameter::kMetallic).measured) << "a misfit does not make a fabric metallic";
+  const double roughness = MeanAbsError(scene, result, FitParameter::kRoughness);
+  const double specular = MeanAbsError(scene, result, FitParameter::kSpecular);
+  const double sheen = MeanAbsError(scene, result, FitParameter::kSheen);
+  double worst_rmse = 0.0;
+  for (const Observation& o : scene.stack.observations) {
+    if (!held_out.count(o.light)) continue;
+    const double rmse = RelativeRmse(RenderFitted(result, scene.stack, scene.geometry, o), o.rgb);
+    worst_rmse = std::max(worst_rmse, rmse);
+    if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+      std::cout << "mismatch held-out view " << o.view << " light " << o.light << " rmse " << rmse << "\n";
+    }
+  }
+  double rms_residual = 0.0;
+  for (const ClusterFit& c : result.clusters) rms_residual = std::max(rms_residual, c.rms_relative_residual);
+  EXPECT_GT(rms_residual, kMismatchFlagRelativeRms) << "the misfit must show in the report";
+  bool flagged = false;
+  for (const std::string& m : result.convergence.messages) flagged = flagged || m.find("mismatch") != std::string::npos;
+  EXPECT_TRUE(flagged) << "the convergence report names the model mismatch";
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "mismatch: mean |error| roughness " << roughness << ", specular " << specular << ", sheen " << sheen
+              << " (Charlie sheen value vs Disney sheen fit); worst held-out relative RMSE " << worst_rmse
+              << "; worst cluster relative RMS residual " << rms_residual << "\n";
+  }
+}
+
+// Throughput check, not a correctness test (no test asserts time): a 512 x 512 grid (0.26 MP)
+// with the overhead rig, default options. Run explicitly:
+//   fitting_tests --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_Throughput*'
+// and scale the per-pixel time linearly to 36 MP (cluster fits do not grow with the image).
+TEST_F(PrincipledFitTest, DISABLED_Throughput) {
+  SceneSpec spec;
+  spec.width = 512;
+  spec.height = 512;
+  spec.pitch_mm = 0.02;
+  spec.lights_deg = OverheadLights();
+  spec.material = [&](int col, int row) { return TwoFabrics(col / 8, row / 8, spec.width / 8, false); };
+  const Scene scene = MakeScene(spec);
+  FitOptions options;
+  if (std::getenv("U3MSCAN_FIT_NO_REFINE") != nullptr) options.refine_per_pixel = false;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  const double megapixels = spec.width * spec.height / 1e6;
+  std::cout << "pixels " << spec.width * spec.height << ", observations " << scene.stack.observations.size()
+            << ", clusters " << result.clusters.size() << ", refined " << result.convergence.pixels_refined << "\n"
+            << "gather " << result.times.gather_s << " s, clustering " << result.times.clustering_s
+            << " s, cluster fit " << result.times.cluster_fit_s << " s, per pixel " << result.times.per_pixel_s
+            << " s (" << result.times.per_pixel_s / megapixels << " s/MP), total " << result.times.total_s << " s\n";
+  ExpectFinite(result);
 }
 
 }  // namespace

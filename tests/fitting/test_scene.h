@@ -1,7 +1,8 @@
 #pragma once
 // Tiny synthetic stacks for the fitting tests, rendered here with the core BRDF (not with the
 // fitter's own code paths): a bumpy height field on a metric grid, per-pixel Principled parameters
-// from a material function, directional lights, an overhead and optionally an oblique camera.
+// from a material function, directional or point lights, an overhead and optionally an oblique
+// camera.
 //
 // Shading frame convention (docs/fitting.md): z = normal, x = world +x projected into the tangent
 // plane. World: z toward the overhead camera, lengths in mm.
@@ -24,6 +25,12 @@ inline constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 using MaterialFn = std::function<PrincipledParams<double>(int col, int row)>;
 
+// Reflectance model of the render. kCharlieSheen is the model-mismatch case of the issue: Disney's
+// sheen replaced by the Estevez-Kulla "Charlie" sheen (SIGGRAPH 2017) with the Neubelt-Pettineo
+// cloth visibility, the second model of the synthetic scanner (datasets_synthetic/renderer.h),
+// written here again from the papers so that the fitting tests stay independent of that library.
+enum class RenderModel { kPrincipled, kCharlieSheen };
+
 struct SceneSpec {
   int width = 16;
   int height = 16;
@@ -39,6 +46,10 @@ struct SceneSpec {
   double oblique_view_deg = 60.0;  // camera angle from the sample normal, azimuth 0 (+x side)
   // Values at or above this are clipped and flagged kSaturated (<= 0: no saturation).
   double white_level = 0.0;
+  // > 0: point lights at this distance (mm) from the grid centre in the directions above, with a
+  // cos^2 emission profile aimed at the centre; rgb then scales with 1/d^2 (core LightModel).
+  double point_light_distance_mm = 0.0;
+  RenderModel model = RenderModel::kPrincipled;
   MaterialFn material;
 };
 
@@ -80,7 +91,27 @@ inline Eigen::Vector3d LightDirection(double elevation_deg, double azimuth_deg) 
   return {std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)};
 }
 
-// Renders one observation with the core BRDF: rgb = f * cos_l * E (E = 1, directional lights).
+// Charlie sheen roughness floor: the distribution is undefined at 0 (Estevez and Kulla clamp too).
+inline constexpr double kMinCharlieRoughness = 0.07;
+
+// f of the chosen model (1/sr), L and V unit in the local frame.
+inline Vec3<double> EvaluateModel(RenderModel model, const PrincipledParams<double>& params, const Vec3<double>& l,
+                                  const Vec3<double>& v) {
+  if (model == RenderModel::kPrincipled) return EvaluatePrincipled(params, l, v);
+  if (!(l.z() > 0.0) || !(v.z() > 0.0)) return Vec3<double>::Zero();
+  PrincipledParams<double> base = params;
+  base.sheen = 0.0;
+  const Vec3<double> h = (l + v).normalized();
+  const double r = std::max(kMinCharlieRoughness, params.roughness);
+  // D = (2 + 1/r) sin(theta_h)^(1/r) / (2 pi); V = 1 / (4 (cos_l + cos_v - cos_l cos_v)).
+  const double sin2 = std::max(0.0, 1.0 - h.z() * h.z());
+  const double d = (2.0 + 1.0 / r) * std::pow(sin2, 0.5 / r) / (2.0 * 3.14159265358979323846);
+  const double vis = 1.0 / (4.0 * (l.z() + v.z() - l.z() * v.z()));
+  const Vec3<double> tint = brdf::Mix(Vec3<double>(1, 1, 1), brdf::TintColor(params.base_color), params.sheen_tint);
+  return EvaluatePrincipled(base, l, v) + tint * (params.sheen * d * vis * (1.0 - params.metallic));
+}
+
+// Renders one observation with the core BRDF: rgb = f * cos_l * E (E = 1 for directional lights).
 inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, int view, int light) {
   const Stack& stack = scene.stack;
   Observation o;
@@ -97,12 +128,13 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
                               scene.geometry.normals.at(2, row, col));
       const Eigen::Vector3d t = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
       const Eigen::Vector3d b = n.cross(t);
-      const Eigen::Vector3d lw = stack.lights[light].direction_in_world;
+      const Eigen::Vector3d lw = stack.lights[light].DirectionFrom(point);
+      const double irradiance = stack.lights[light].RelativeIrradianceAt(point);
       const Eigen::Vector3d vw = (stack.views[view].centre_in_world_mm - point).normalized();
       const Vec3<double> l(lw.dot(t), lw.dot(b), lw.dot(n));
       const Vec3<double> v(vw.dot(t), vw.dot(b), vw.dot(n));
       const auto& params = scene.truth[static_cast<std::size_t>(row) * spec.width + col];
-      const Vec3<double> rgb = EvaluatePrincipled(params, l, v) * std::max(0.0, l.z());
+      const Vec3<double> rgb = EvaluateModel(spec.model, params, l, v) * (std::max(0.0, l.z()) * irradiance);
       bool saturated = false;
       for (int c = 0; c < 3; ++c) {
         double value = rgb(c);
@@ -139,6 +171,13 @@ inline Scene MakeScene(const SceneSpec& spec) {
     light.id += std::to_string(i);
     light.type = LightType::kDirectional;
     light.direction_in_world = LightDirection(spec.lights_deg[i].first, spec.lights_deg[i].second);
+    if (spec.point_light_distance_mm > 0.0) {
+      light.type = LightType::kPoint;
+      light.position_in_world_mm = centre + spec.point_light_distance_mm * light.direction_in_world;
+      light.has_profile = true;
+      light.profile_axis_in_world = -light.direction_in_world;
+      light.profile_exponent = 2.0;
+    }
     stack.lights.push_back(light);
   }
   scene.geometry.normals = Image(spec.width, spec.height, 3, 0.0f, spec.pitch_mm);

@@ -4,6 +4,8 @@
 
 #include <Eigen/Eigenvalues>
 #include <cstdio>
+#include <limits>
+#include <random>
 
 #include "render_stack.h"
 
@@ -191,6 +193,22 @@ TEST(PhotometricStereo, GrazingLightsStayFinite) {
   }
 }
 
+TEST(PhotometricStereo, NearlyVerticalSurfaceIsClampedNotInfinite) {
+  const MetricGrid grid = Grid(8, 8, kPitchMm);
+  // A wall tilted 88 deg toward +x (n_z = 0.035): lit by the lights on its side only.
+  const double slope = std::tan(88.0 * std::numbers::pi / 180.0);
+  const HeightField wall{[=](double x, double) { return -slope * x; }, [=](double, double) { return -slope; },
+                         [](double, double) { return 0.0; }};
+  const Stack stack = RenderStack(grid, Ring(12, 20.0, 40.0, Directional), wall);
+  const PhotometricStereoOptions options = Options(PsSolver::kRobust);
+  const PhotometricStereoResult res = RunPhotometricStereo(stack, options);
+  ExpectSane(res);
+  EXPECT_EQ(res.clamped_normal_pixels, 64);
+  EXPECT_NEAR(res.normal.at(2, 4, 4), options.min_normal_z, 1e-6);
+  EXPECT_GT(res.normal.at(0, 4, 4), 0.99f);  // the azimuth is kept
+  EXPECT_LT(MaxOf(res.confidence), 1.0);
+}
+
 TEST(PhotometricStereo, NearlyCoplanarLightsGiveLowConfidence) {
   const MetricGrid grid = Grid(16, 16, kPitchMm);
   std::vector<LightModel> lights;
@@ -292,6 +310,34 @@ TEST(PhotometricStereo, AllBlackGivesZeroConfidenceAndUpNormals) {
   Stack empty = stack;
   empty.observations.clear();  // no photographs at all
   ExpectSane(RunPhotometricStereo(empty, Options(PsSolver::kRobust)));
+}
+
+TEST(PhotometricStereo, GarbageInputNeverGivesNaN) {
+  // Negative, huge, NaN and Inf values, random flags and irradiance: the output stays finite.
+  const MetricGrid grid = Grid(16, 16, kPitchMm);
+  const auto make = [](double a, double e) { return Point(a, e, 40.0, 2.0); };
+  std::vector<LightModel> lights = Ring(4, 35.0, 60.0, make);
+  for (const auto& l : Ring(4, 20.0, 70.0, Directional)) lights.push_back(l);
+  RenderOptions render;
+  render.measured_irradiance = true;
+  Stack stack = RenderStack(grid, lights, TestSurface(), render);
+  std::mt19937 rng(42);
+  std::uniform_int_distribution<int> pick(0, 9);
+  const float specials[] = {-1.0f, 0.0f, 1e30f, -1e30f, std::nanf(""), std::numeric_limits<float>::infinity(), 1e-30f};
+  for (auto& ob : stack.observations) {
+    ob.flags.assign(16 * 16, 0);
+    for (std::size_t i = 0; i < ob.rgb.data().size(); ++i)
+      if (pick(rng) < 3) ob.rgb.data()[i] = specials[pick(rng) % 7];
+    for (std::size_t i = 0; i < ob.irradiance.data().size(); ++i) {
+      if (pick(rng) < 2) ob.irradiance.data()[i] = specials[pick(rng) % 7];
+      if (pick(rng) < 2) ob.flags[i] = static_cast<std::uint8_t>(pick(rng));
+    }
+  }
+  for (PsSolver solver : {PsSolver::kLeastSquares, PsSolver::kRobust}) {
+    const PhotometricStereoResult res = RunPhotometricStereo(stack, Options(solver));
+    ExpectSane(res);
+    EXPECT_TRUE(AllFinite(res.height_mm));
+  }
 }
 
 TEST(PhotometricStereo, TinyImagesWork) {

@@ -17,9 +17,8 @@ constexpr double kPitchMm = 25.4 / 600.0;
 
 HeightField BenchSurface() { return Bumps(0.1, 2.0); }
 
-Image BenchNormals(int size) {
+Image BenchNormals(int size, const HeightField& s) {
   const MetricGrid grid = Grid(size, size, kPitchMm);
-  const HeightField s = BenchSurface();
   Image n(size, size, 3, 0.0f, kPitchMm);
   for (int r = 0; r < size; ++r)
     for (int c = 0; c < size; ++c) {
@@ -45,16 +44,26 @@ BENCHMARK_CAPTURE(BM_PhotometricStereo, ls_distant, PsSolver::kLeastSquares, fal
 BENCHMARK_CAPTURE(BM_PhotometricStereo, robust_distant, PsSolver::kRobust, false)->Arg(256)->Arg(1024)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_PhotometricStereo, robust_near, PsSolver::kRobust, true)->Arg(256)->Arg(1024)->Unit(benchmark::kMillisecond);
 
-void BM_Integrate(benchmark::State& state, Integrator method) {
+// A tear: z = k atan2 around a point near the left border; not integrable, the robust
+// integrator has to find the cut.
+HeightField Tear(int size) {
+  const double xc = -0.3 * size * kPitchMm, yc = 0.0, k = 0.05;  // yc on a row boundary
+  return {[=](double x, double y) { return k * std::atan2(y - yc, x - xc); },
+          [=](double x, double y) { return -k * (y - yc) / ((x - xc) * (x - xc) + (y - yc) * (y - yc)); },
+          [=](double x, double y) { return k * (x - xc) / ((x - xc) * (x - xc) + (y - yc) * (y - yc)); }};
+}
+
+void BM_Integrate(benchmark::State& state, Integrator method, bool tear) {
   const int size = static_cast<int>(state.range(0));
-  const Image normals = BenchNormals(size);
+  const Image normals = BenchNormals(size, tear ? Tear(size) : BenchSurface());
   IntegrationOptions options;
   options.method = method;
   for (auto _ : state) benchmark::DoNotOptimize(IntegrateNormals(normals, Image(), options));
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(size) * size);
 }
-BENCHMARK_CAPTURE(BM_Integrate, dct, Integrator::kDct)->Arg(256)->Arg(1024)->Arg(2048)->Arg(6000)->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(BM_Integrate, robust, Integrator::kRobust)->Arg(256)->Arg(1024)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Integrate, dct, Integrator::kDct, false)->Arg(256)->Arg(1024)->Arg(2048)->Arg(6000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Integrate, robust, Integrator::kRobust, false)->Arg(256)->Arg(1024)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Integrate, robust_tear, Integrator::kRobust, true)->Arg(256)->Arg(1024)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace u3mscan::reconstruction

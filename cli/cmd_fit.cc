@@ -1,0 +1,61 @@
+// `u3mscan fit CAPTURE -o DIR`: everything up to the Principled fit of one side; writes the fitted
+// parameter maps as float EXR and fit.json (per-cluster parameters, uncertainties, what was left
+// out and why, run times).
+#include <iostream>
+#include <memory>
+
+#include "cli/command.h"
+#include "cli/progress_bar.h"
+#include "cli/stage_outputs.h"
+#include "pipeline/stages.h"
+
+namespace u3mscan::cli {
+namespace {
+
+U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled parameter maps and fit.json", 50,
+                         [](CLI::App& sub) {
+  struct Args {
+    std::string capture, out, side = "front", preset = "balanced";
+    double dpi = 0.0;
+  };
+  auto args = std::make_shared<Args>();
+  sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
+  sub.add_option("-o,--out", args->out, "Output folder: maps/ and fit.json go into it")->required();
+  sub.add_option("--preset", args->preset, "fast | balanced | best")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"fast", "balanced", "best"}));
+  sub.add_option("--side", args->side, "front | back")->capture_default_str()->check(CLI::IsMember({"front", "back"}));
+  sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
+  sub.footer(
+      "Runs calibration and reconstruction first. Writes DIR/maps/<parameter>.exr for every measured\n"
+      "parameter (roughness, specular, ...; base_color linear RGB) and DIR/fit.json. Parameters the\n"
+      "capture does not constrain get no map: fit.json says why.");
+  return std::function<int()>([args] {
+    StageOptions stages = OptionsForPreset(ParsePreset(args->preset));
+    if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
+    RunReport report;
+    ProgressBar bar(false);
+    PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
+    const Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    const SideReconstruction geometry = ReconstructSide(stack, stages, Image(), &report, bar.Callback());
+    const fitting::FitResult fit = FitSide(stack, geometry, stages, &report, bar.Callback());
+    bar.Finish();
+    std::vector<std::pair<std::string, Image>> maps{{"base_color.exr", fit.base_color}};
+    for (int p = 0; p < fitting::kFitParameterCount; ++p) {
+      maps.emplace_back(std::string(fitting::FitParameterName(p)) + ".exr", fit.parameter_maps[p]);
+    }
+    WriteStageOutputs(args->out, maps, {{"fit.json", fitting::FitResultToJson(fit)}});
+    for (int p = 0; p < fitting::kFitParameterCount; ++p) {
+      const auto& decision = fit.maps[p];
+      std::cout << "  " << fitting::FitParameterName(p) << ": "
+                << (!decision.measured ? "not measured" : decision.constant ? "constant" : "map") << " "
+                << decision.value << (decision.reason.empty() ? "" : " (" + decision.reason + ")") << "\n";
+    }
+    PrintSteps(report);
+    std::cout << "maps and fit.json in " << args->out << "\n";
+    return kExitOk;
+  });
+});
+
+}  // namespace
+}  // namespace u3mscan::cli

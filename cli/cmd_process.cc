@@ -1,0 +1,105 @@
+// `u3mscan process CAPTURE... -o OUT`: the main job. Capture folders (or folders of them) through
+// calibration, reconstruction and fitting to complete U3M materials with reports.
+#include <iostream>
+#include <memory>
+
+#include "cli/command.h"
+#include "cli/progress_bar.h"
+#include "core/error.h"
+#include "core/logging.h"
+#include "core/parallel.h"
+#include "pipeline/batch.h"
+#include "pipeline/process.h"
+
+namespace u3mscan::cli {
+namespace {
+
+struct ProcessArgs {
+  std::vector<std::string> inputs;
+  std::string out;
+  std::string preset = "balanced";
+  ProcessOptions options;
+  std::string id, created;
+  double dpi = 0.0;
+  int jobs = 1;
+  int threads = 0;
+  bool skip_existing = false;
+  bool quiet = false;
+};
+
+U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> complete U3M material(s) and reports", 1,
+                         [](CLI::App& sub) {
+  auto args = std::make_shared<ProcessArgs>();
+  sub.add_option("CAPTURE", args->inputs, "Capture folders (with capture.json), or folders holding capture folders")
+      ->required();
+  sub.add_option("-o,--out", args->out, "Output folder (one capture: the material goes straight in; several: one sub-folder each)")
+      ->required();
+  sub.add_option("--preset", args->preset, "fast | balanced | best: accuracy against run time (docs/presets.md)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"fast", "balanced", "best"}));
+  sub.add_option("--schema", args->options.schema, "auto | 1.0 | 1.1 (auto: the lowest version that holds the content)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "1.0", "1.1"}));
+  sub.add_flag("--package", args->options.package, "Write one .u3ma package instead of .u3m + textures/");
+  sub.add_option("--dpi", args->dpi, "Resolution of the finished maps (default: the manifest's output.dpi)")
+      ->check(CLI::Range(1.0, 10000.0));
+  sub.add_flag("--debug-maps", args->options.debug_maps,
+               "Also write maps/*.exr: normal, albedo, height (mm), confidence, residual and fitted maps");
+  sub.add_option("--solver", args->options.solver, "Override the preset's photometric stereo: ls | robust")
+      ->check(CLI::IsMember({"ls", "robust"}));
+  sub.add_option("--integrator", args->options.integrator, "Override the preset's integration: dct | robust")
+      ->check(CLI::IsMember({"dct", "robust"}));
+  sub.add_option("--id", args->id, "Material id (a lowercase version-4 UUID) instead of a new random one");
+  sub.add_option("--created", args->created, "Creation time (UTC, 2026-11-22T10:00:00Z) instead of now");
+  sub.add_option("--jobs", args->jobs, "Captures processed at the same time (each uses --threads threads)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 256));
+  sub.add_option("--threads", args->threads, "Threads per capture (default: all cores)")->check(CLI::Range(0, 1024));
+  sub.add_flag("--skip-existing", args->skip_existing,
+               "Skip captures whose output is complete (material + report.json with status ok): resume a batch");
+  sub.add_flag("--quiet", args->quiet, "No progress bar, errors only");
+  sub.footer(
+      "Writes OUT/<name>.u3m + OUT/textures/ (or OUT/<name>.u3ma), OUT/report.html and OUT/report.json;\n"
+      "with several captures, OUT/<name>/ for each and a summary table at the end. One capture that\n"
+      "fails is reported and the others still finish. The same input with the same --id and --created\n"
+      "gives the same material, so a batch can be split over machines (docs/batch.md).\n"
+      "Exit status: 0 all done, 1 some capture failed, 2 bad usage.");
+  return std::function<int()>([args] {
+    if (args->quiet) SetLogLevel(LogLevel::kError);
+    ProcessOptions options = args->options;
+    options.preset = ParsePreset(args->preset);
+    if (args->dpi > 0.0) options.dpi = args->dpi;
+    if (!args->id.empty()) options.id = args->id;
+    if (!args->created.empty()) options.created = args->created;
+    std::string why;
+    if (!options.Check(&why)) {
+      LogError() << why;
+      return kExitUsage;
+    }
+    if (args->threads > 0) SetThreadCount(args->threads);
+
+    std::vector<std::filesystem::path> inputs(args->inputs.begin(), args->inputs.end());
+    const std::vector<CaptureJob> jobs = PlanBatch(inputs, args->out);
+    BatchOptions batch;
+    batch.parallel_captures = args->jobs;
+    batch.skip_existing = args->skip_existing;
+    const bool single = jobs.size() == 1;
+    const auto outcomes = RunBatch(
+        jobs,
+        [&](const CaptureJob& job) {
+          ProgressBar bar(args->quiet || batch.parallel_captures > 1, single ? "" : job.name + ": ");
+          const ProcessResult result = ProcessCapture(job, options, bar.Callback());
+          bar.Finish();
+          if (!args->quiet) {
+            std::cout << job.name << ": wrote " << result.material.string() << " and "
+                      << (job.out_dir / "report.html").string() << " (" << result.report.total_seconds << " s)\n";
+          }
+        },
+        [&](const CaptureJob& job) { return IsOutputComplete(job, options); }, batch);
+    if (!single || BatchExitCode(outcomes) != 0) std::cout << FormatBatchSummary(outcomes);
+    return BatchExitCode(outcomes);
+  });
+});
+
+}  // namespace
+}  // namespace u3mscan::cli

@@ -1,0 +1,60 @@
+// `u3mscan reconstruct CAPTURE -o DIR`: calibration, rectification, photometric stereo and
+// integration of one side; writes the maps and prints each step's run time.
+#include <iostream>
+#include <memory>
+
+#include "cli/command.h"
+#include "cli/progress_bar.h"
+#include "cli/stage_outputs.h"
+#include "pipeline/stages.h"
+
+namespace u3mscan::cli {
+namespace {
+
+U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal, albedo, height and confidence maps", 40,
+                         [](CLI::App& sub) {
+  struct Args {
+    std::string capture, out, side = "front", solver = "robust", integrator = "dct";
+    double dpi = 0.0;
+  };
+  auto args = std::make_shared<Args>();
+  sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
+  sub.add_option("-o,--out", args->out, "Output folder: maps/ goes into it")->required();
+  sub.add_option("--solver", args->solver, "Photometric stereo: ls (least squares) | robust (band + IRLS)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"ls", "robust"}));
+  sub.add_option("--integrator", args->integrator, "Normal integration: dct (Poisson) | robust (keeps edges)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"dct", "robust"}));
+  sub.add_option("--side", args->side, "front | back")->capture_default_str()->check(CLI::IsMember({"front", "back"}));
+  sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
+  sub.footer(
+      "Writes DIR/maps/normal.exr (float, unit, world frame: x right, y up, z toward the camera),\n"
+      "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).");
+  return std::function<int()>([args] {
+    StageOptions stages = OptionsForPreset(Preset::kBalanced);
+    stages.photometric_stereo.solver = reconstruction::ParsePsSolver(args->solver);
+    stages.integration.method = reconstruction::ParseIntegrator(args->integrator);
+    stages.photometric_stereo.integration.method = stages.integration.method;
+    if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
+    RunReport report;
+    ProgressBar bar(false);
+    PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
+    const Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    const SideReconstruction result = ReconstructSide(stack, stages, Image(), &report, bar.Callback());
+    bar.Finish();
+    const auto& ps = result.photometric_stereo;
+    WriteStageOutputs(args->out,
+                      {{"normal.exr", ps.normal}, {"albedo.exr", ps.albedo}, {"height.exr", result.height_mm},
+                       {"confidence.exr", ps.confidence}},
+                      {});
+    std::cout << "reconstructed " << stack.grid.width << "x" << stack.grid.height << " at " << stack.grid.dpi()
+              << " dpi; ill-conditioned pixels: " << ps.ill_conditioned_pixels << "\n";
+    PrintSteps(report);
+    std::cout << "maps in " << (std::filesystem::path(args->out) / "maps").string() << "\n";
+    return kExitOk;
+  });
+});
+
+}  // namespace
+}  // namespace u3mscan::cli

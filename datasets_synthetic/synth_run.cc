@@ -1,0 +1,54 @@
+#include "datasets_synthetic/synth_run.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/logging.h"
+#include "core/units.h"
+#include "datasets_synthetic/rig.h"
+#include "datasets_synthetic/scene.h"
+
+namespace u3mscan::synthetic {
+
+namespace fs = std::filesystem;
+
+void SynthOptions::Check() const {
+  auto one_of = [](const std::vector<std::string>& names) {
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+    return "one of " + list;
+  };
+  const auto scenes = SceneNames(), rigs = RigNames();
+  if (std::find(scenes.begin(), scenes.end(), scene) == scenes.end()) throw InputError("--scene", "", one_of(scenes) + ", got '" + scene + "'");
+  if (std::find(rigs.begin(), rigs.end(), rig) == rigs.end()) throw InputError("--rig", "", one_of(rigs) + ", got '" + rig + "'");
+  // The DNG writer needs 22 pixels a side (libraw's thumbnail limit); 65536 is the frame limit.
+  constexpr int kMinSide = 32, kMaxSide = 1 << 16;
+  if (width < kMinSide || height < kMinSide || width > kMaxSide || height > kMaxSide) {
+    throw InputError("--size", "", "WxH with each side in [" + std::to_string(kMinSide) + ", " + std::to_string(kMaxSide) + "]");
+  }
+  if (!(dpi >= 10.0 && dpi <= 20000.0)) throw InputError("--dpi", "", "a resolution in [10, 20000] dots per inch");
+}
+
+CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, const TruthWriter& truth_writer) {
+  options.Check();
+  RigOptions rig_options;
+  rig_options.width = options.width;
+  rig_options.height = options.height;
+  rig_options.pitch_mm = DpiToPitchMm(options.dpi);
+  rig_options.seed = options.seed;
+  const Rig rig = MakeRig(options.rig, rig_options);
+  SceneOptions scene_options;
+  scene_options.width = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.width)));
+  scene_options.height = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.height)));
+  scene_options.pitch_mm = rig_options.pitch_mm;
+  scene_options.seed = options.seed;
+  const auto start = std::chrono::steady_clock::now();
+  const SceneTruth scene = MakeScene(options.scene, scene_options);
+  LogInfo() << "synth: scene '" << options.scene << "' " << scene_options.width << "x" << scene_options.height << " at "
+            << options.dpi << " dpi made in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
+  return WriteSyntheticCapture(scene, rig, options.capture, out_dir, truth_writer);
+}
+
+}  // namespace u3mscan::synthetic

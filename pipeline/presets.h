@@ -1,0 +1,34 @@
+#pragma once
+// Presets: one word that trades accuracy for run time across every stage (docs/presets.md gives
+// what each changes and its measured cost).
+//   fast      least-squares photometric stereo, DCT integration, few clusters, no per-pixel refit
+//   balanced  robust photometric stereo (band + IRLS), DCT integration, default clustering, per-pixel refit
+//   best      robust photometric stereo with more reweighting, edge-keeping robust integration, more
+//             clusters and samples, longer per-pixel refit
+
+#include <string>
+
+#include "capture/calibrate.h"
+#include "fitting/principled_fit.h"
+#include "reconstruction/normal_integration.h"
+#include "reconstruction/photometric_stereo.h"
+
+namespace u3mscan {
+
+enum class Preset { kFast, kBalanced, kBest };
+
+// "fast", "balanced", "best"; ParsePreset throws std::invalid_argument for another word.
+std::string PresetName(Preset preset);
+Preset ParsePreset(const std::string& name);
+
+// Every stage's options, as one preset sets them.
+struct StageOptions {
+  CalibrationOptions calibration;
+  reconstruction::PhotometricStereoOptions photometric_stereo;
+  reconstruction::IntegrationOptions integration;  // distant lights (near lights integrate inside PS)
+  fitting::FitOptions fit;
+};
+
+StageOptions OptionsForPreset(Preset preset);
+
+}  // namespace u3mscan

@@ -1,0 +1,354 @@
+#include "pipeline/process.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+#include <system_error>
+
+#include "capture/rectification.h"
+#include "core/error.h"
+#include "core/logging.h"
+#include "core/system_stats.h"
+#include "pipeline/alpha_map.h"
+#include "pipeline/material_writer.h"
+#include "pipeline/stages.h"
+#include "u3m/image_io.h"
+#include "u3m/material.h"
+#include "u3mscan/version.h"
+
+namespace u3mscan {
+namespace fs = std::filesystem;
+
+namespace {
+
+// The U3M key of each fitted parameter (fitting::FitParameter order).
+constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
+    "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
+
+std::string UtcNowText() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  std::ostringstream s;
+  s << std::put_time(&tm, "%Y-%m-%dT%H:%M:%SZ");
+  return s.str();
+}
+
+nlohmann::json Vector3Json(const Eigen::Vector3d& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); }
+
+// Our custom section: everything about how the material was made that a U3M has no field for.
+// Run times are NOT in it (they go to the report), so two runs write the same material.
+nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptions& options,
+                             const std::vector<ParameterRecord>& parameters, const nlohmann::json& quality) {
+  const Manifest& manifest = prepared.capture.manifest();
+  nlohmann::json custom;
+  custom["scanner"] = {{"vendor", manifest.scanner.vendor},
+                       {"model", manifest.scanner.model},
+                       {"serial", manifest.scanner.serial},
+                       {"software", manifest.scanner.software}};
+  nlohmann::json capture_info = {{"format", manifest.format}, {"sample", manifest.sample.name}};
+  for (const char* key : {"capture_time", "captured", "created"}) {
+    if (manifest.extra.contains(key)) capture_info["capture_time"] = manifest.extra[key];
+  }
+  custom["capture"] = capture_info;
+  custom["software"] = {{"name", kSoftwareName}, {"version", kSoftwareVersion}};
+  custom["processing"] = {{"preset", PresetName(options.preset)},
+                          {"schema", options.schema},
+                          {"solver", options.solver.empty() ? "preset" : options.solver},
+                          {"integrator", options.integrator.empty() ? "preset" : options.integrator},
+                          {"dpi", prepared.calibration.grid.dpi()}};
+  nlohmann::json cameras = nlohmann::json::array();
+  for (const auto& camera : prepared.calibration.cameras) {
+    nlohmann::json c = {{"id", camera.id}, {"intrinsics_source", camera.intrinsics_source}, {"pose_source", camera.pose_source}};
+    if (camera.reprojection_error_px) c["reprojection_error_px"] = *camera.reprojection_error_px;
+    cameras.push_back(c);
+  }
+  nlohmann::json lights = nlohmann::json::array();
+  for (const auto& light : prepared.calibration.lights) {
+    nlohmann::json l = {{"id", light.model.id},
+                        {"type", light.model.type == LightType::kPoint ? "point" : "directional"},
+                        {"source", light.source},
+                        {"intensity_rgb", Vector3Json(light.model.intensity_rgb)}};
+    if (light.model.type == LightType::kPoint) l["position_mm"] = Vector3Json(light.model.position_in_world_mm);
+    else l["direction"] = Vector3Json(light.model.direction_in_world);
+    if (light.residual) l["residual"] = {{"value", *light.residual}, {"unit", light.residual_unit}};
+    lights.push_back(l);
+  }
+  custom["geometry"] = {{"cameras", cameras}, {"lights", lights}};
+  nlohmann::json exposures = nlohmann::json::array();
+  for (const FrameSpec& frame : manifest.frames) {
+    if (frame.role == FrameRole::kSample) {
+      exposures.push_back({{"file", frame.file}, {"light", frame.light.value_or("")}, {"exposure_s", frame.exposure_s}});
+    }
+  }
+  custom["exposures"] = exposures;
+  custom["calibration"] = prepared.calibration.ToJson();
+  nlohmann::json sources = nlohmann::json::object();
+  for (const auto& p : parameters) sources[p.name] = {{"source", ParameterSourceName(p.source)}, {"reason", p.reason}};
+  custom["parameter_sources"] = sources;
+  custom["quality"] = quality;
+  return custom;
+}
+
+void WriteDebugMap(const Image& image, const fs::path& path) {
+  if (image.empty()) return;
+  ImageWriteOptions write;
+  write.format = SampleFormat::kFloat32;
+  WriteImageFile(image, path, write);
+}
+
+}  // namespace
+
+bool ProcessOptions::Check(std::string* why) const {
+  auto fail = [&](const std::string& message) {
+    if (why) *why = message;
+    return false;
+  };
+  if (schema != "auto" && schema != "1.0" && schema != "1.1") return fail("--schema must be auto, 1.0 or 1.1");
+  if (dpi && !(*dpi > 0.0 && *dpi <= 10000.0)) return fail("--dpi must be a number in (0, 10000]");
+  if (id && !IsUuid4(*id)) return fail("--id must be a version-4 UUID such as 3f2c1a9e-8b7d-4c6e-9a5f-0123456789ab");
+  if (created && !ParseUtcTimestamp(*created)) return fail("--created must be a UTC time like 2026-11-22T10:00:00Z");
+  if (!solver.empty() && solver != "ls" && solver != "robust") return fail("--solver must be ls or robust");
+  if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
+  return true;
+}
+
+std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text) {
+  std::tm tm{};
+  int millis = 0;
+  std::istringstream in(text);
+  in >> std::get_time(&tm, "%Y-%m-%dT%H:%M:%S");
+  if (in.fail()) return std::nullopt;
+  char c = 0;
+  in.get(c);
+  if (c == '.') {
+    std::string digits;
+    while (in.get(c) && std::isdigit(static_cast<unsigned char>(c))) digits += c;
+    if (digits.empty() || digits.size() > 9) return std::nullopt;
+    millis = std::stoi((digits + "00").substr(0, 3));
+  }
+  if (c != 'Z' || in.get(c)) return std::nullopt;
+  const std::time_t seconds = timegm(&tm);
+  return static_cast<std::int64_t>(seconds) * 1000 + millis;
+}
+
+fs::path MaterialPathFor(const CaptureJob& job, const ProcessOptions& options) {
+  return job.out_dir / (job.name + (options.package ? ".u3ma" : ".u3m"));
+}
+
+bool IsOutputComplete(const CaptureJob& job, const ProcessOptions& options) {
+  std::error_code ec;
+  if (!fs::is_regular_file(MaterialPathFor(job, options), ec)) return false;
+  std::ifstream in(job.out_dir / "report.json");
+  if (!in) return false;
+  try {
+    const nlohmann::json report = nlohmann::json::parse(in);
+    return report.value("status", "") == "ok";
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& options, const ProgressCallback& progress) {
+  std::string why;
+  if (!options.Check(&why)) throw InputError("command line", "", why);
+  const double run_start = StageClock();
+  ProcessResult result;
+  RunReport& report = result.report;
+  report.capture_name = job.name;
+  report.capture_path = job.capture_dir.string();
+  report.output_path = job.out_dir.string();
+  report.started_utc = UtcNowText();
+  report.preset = PresetName(options.preset);
+
+  StageOptions stages = OptionsForPreset(options.preset);
+  if (options.dpi) stages.calibration.dpi = options.dpi;
+  if (!options.solver.empty()) stages.photometric_stereo.solver = reconstruction::ParsePsSolver(options.solver);
+  if (!options.integrator.empty()) {
+    stages.integration.method = reconstruction::ParseIntegrator(options.integrator);
+    stages.photometric_stereo.integration.method = stages.integration.method;
+  }
+  report.options = {{"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
+                    {"debug_maps", options.debug_maps},
+                    {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
+                    {"integrator", reconstruction::IntegratorName(stages.integration.method)}};
+  if (options.dpi) report.options["dpi"] = *options.dpi;
+
+  PreparedCapture prepared = PrepareCapture(job.capture_dir, stages, &report, progress);
+  const Manifest& manifest = prepared.capture.manifest();
+
+  ScanMaterialRequest request;
+  request.name = manifest.sample.name.empty() ? job.name : manifest.sample.name;
+  request.file_stem = job.name;
+  request.description = manifest.sample.description;
+  request.id = options.id;
+  if (options.created) request.created_ms = ParseUtcTimestamp(*options.created);
+  request.schema = options.schema;
+  request.package = options.package;
+  request.thickness_mm = manifest.sample.thickness_mm;
+  request.weight_gsm = manifest.sample.weight_gsm;
+  request.vendor_key = manifest.scanner.vendor.empty() ? std::string(kOwnVendorKey) : manifest.scanner.vendor;
+  if (!(request.thickness_mm && request.weight_gsm)) {
+    report.steps.push_back({"physics", false, "the manifest gives no thickness and weight", 0.0});
+  }
+
+  struct DebugMaps {
+    std::string prefix;
+    Image normal, albedo, height, confidence, residual;
+    std::vector<std::pair<std::string, Image>> fitted;
+  };
+  std::vector<DebugMaps> debug;
+  nlohmann::json quality = nlohmann::json::object();
+
+  for (const std::string& side : prepared.sides) {
+    Stack stack = BuildSideStack(prepared, side, stages, &report, progress);
+
+    // Alpha from the backlight frame of this side, when the capture has one.
+    Image alpha;
+    FrameFilter backlight_filter;
+    backlight_filter.role = FrameRole::kBacklight;
+    backlight_filter.side = side;
+    const auto backlight = prepared.capture.Frames(backlight_filter);
+    if (backlight.empty()) {
+      report.steps.push_back({"alpha " + side, false, "no backlight frame", 0.0});
+    } else {
+      const double start = StageClock();
+      const std::size_t index = backlight.front();
+      const CameraCalibration* camera = prepared.calibration.FindCamera(prepared.capture.frame(index).camera);
+      if (!camera) throw std::logic_error("calibration lacks camera " + prepared.capture.frame(index).camera);
+      const RectificationMap map = BuildRectificationMap(camera->model, stack.grid);
+      const RectifiedFrame rectified = Rectify(prepared.capture.LoadFrame(index), map);
+      AlphaEstimate estimate = AlphaFromBacklight(rectified.rgb, rectified.flags);
+      alpha = std::move(estimate.alpha);
+      report.steps.push_back({"alpha " + side, true,
+                              alpha.empty() ? estimate.note
+                                            : "holes cover " + std::to_string(100.0 * estimate.hole_fraction) + " %",
+                              StageClock() - start});
+    }
+
+    SideReconstruction reconstruction = ReconstructSide(stack, stages, alpha, &report, progress);
+    fitting::FitResult fit = FitSide(stack, reconstruction, stages, &report, progress);
+
+    // The side's maps for the writer.
+    SideMaps maps;
+    maps.side = side;
+    maps.base_color = fit.base_color.empty() ? reconstruction.photometric_stereo.albedo : fit.base_color;
+    maps.base_color.set_pitch_mm(stack.grid.pitch_mm);
+    maps.normal = reconstruction.photometric_stereo.normal;
+    maps.normal.set_pitch_mm(stack.grid.pitch_mm);
+    maps.height_mm = reconstruction.height_mm;
+    maps.alpha = alpha;
+    for (int p = 0; p < fitting::kFitParameterCount; ++p) {
+      const fitting::MapReport& decision = fit.maps[p];
+      ScalarMapChoice choice;
+      choice.u3m_key = kU3mKeyOfFitParameter[p];
+      choice.value = decision.value;
+      choice.reason = decision.reason;
+      if (!decision.measured) {
+        choice.source = ParameterSource::kDefault;
+        if (choice.reason.empty()) choice.reason = "not constrained by this capture";
+      } else if (decision.constant || fit.parameter_maps[p].empty()) {
+        choice.source = ParameterSource::kConstant;
+        if (choice.reason.empty()) choice.reason = "uniform within noise";
+      } else {
+        choice.source = ParameterSource::kMeasured;
+        choice.map = fit.parameter_maps[p];
+        choice.map.set_pitch_mm(stack.grid.pitch_mm);
+      }
+      maps.scalars.push_back(std::move(choice));
+    }
+
+    // Quality figures of this side.
+    double residual_mean = 0.0;
+    Image residual = FitResidualMap(fit, stack, reconstruction, 6, &residual_mean);
+    const auto& ps = reconstruction.photometric_stereo;
+    double rms = 0.0, weight = 0.0;
+    for (const auto& cluster : fit.clusters) {
+      rms += cluster.rms_relative_residual * static_cast<double>(cluster.pixel_count);
+      weight += static_cast<double>(cluster.pixel_count);
+    }
+    quality[side] = {{"mean_confidence", ps.confidence.ChannelMean(0)},
+                     {"ill_conditioned_pixels", ps.ill_conditioned_pixels},
+                     {"dark_pixels", ps.dark_pixels},
+                     {"regularised_pixels", ps.regularised_pixels},
+                     {"fit_rms_relative_residual", weight > 0 ? rms / weight : 0.0},
+                     {"mean_relative_render_residual", residual_mean},
+                     {"fit_converged", fit.convergence.all_converged}};
+
+    // Report thumbnails: a few input observations, every map, confidence and residual.
+    const std::size_t n = stack.observations.size();
+    for (std::size_t k = 0; k < std::min<std::size_t>(n, 4); ++k) {
+      const Observation& o = stack.observations[k * n / std::min<std::size_t>(n, 4)];
+      report.images.push_back({side + " light " + stack.lights[o.light].id, "input", o.rgb, false});
+    }
+    report.images.push_back({side + " base colour", "map", maps.base_color, true});
+    Image normal_display = maps.normal;
+    for (float& v : normal_display.data()) v = 0.5f * (v + 1.0f);
+    report.images.push_back({side + " normal", "map", normal_display, true});
+    report.images.push_back({side + " height (mm)", "map", maps.height_mm, false});
+    if (!alpha.empty()) report.images.push_back({side + " alpha", "map", alpha, false});
+    for (const auto& choice : maps.scalars) {
+      if (!choice.map.empty()) report.images.push_back({side + " " + choice.u3m_key, "map", choice.map, false});
+    }
+    report.images.push_back({side + " confidence", "quality", ps.confidence, false});
+    report.images.push_back({side + " render residual (relative)", "quality", residual, false});
+
+    if (options.debug_maps) {
+      DebugMaps d;
+      d.prefix = side == "front" ? "" : side + "_";
+      d.normal = ps.normal;
+      d.albedo = ps.albedo;
+      d.height = maps.height_mm;
+      d.confidence = ps.confidence;
+      d.residual = residual;
+      for (int p = 0; p < fitting::kFitParameterCount; ++p) {
+        if (!fit.parameter_maps[p].empty()) d.fitted.emplace_back(fitting::FitParameterName(p), fit.parameter_maps[p]);
+      }
+      if (!fit.base_color.empty()) d.fitted.emplace_back("base_color", fit.base_color);
+      debug.push_back(std::move(d));
+    }
+    request.sides.push_back(std::move(maps));
+    prepared.capture.ReleaseCache();
+  }
+
+  // The custom section lists every parameter decision (the same ones the writer applies); run
+  // times stay out of it so that two runs write the same material.
+  const double write_start = StageClock();
+  std::vector<ParameterRecord> decided;
+  for (const SideMaps& side : request.sides) {
+    for (const auto& s : side.scalars) decided.push_back({side.side + "/" + s.u3m_key, s.source, s.reason, s.value, 0.0});
+  }
+  request.custom_section = CustomSection(prepared, options, decided, quality);
+  const ScanMaterialResult written = WriteScanMaterial(request, job.out_dir, /*overwrite=*/true);
+  result.material = written.material_path;
+  report.parameters = written.parameters;
+  report.quality = quality;
+  report.steps.push_back({"write U3M " + std::string(SchemaVersionName(written.version)) + (options.package ? " package" : ""),
+                          true, std::to_string(written.files.size()) + " texture files", StageClock() - write_start});
+
+  if (options.debug_maps) {
+    const fs::path dir = job.out_dir / "maps";
+    fs::create_directories(dir);
+    for (const DebugMaps& d : debug) {
+      WriteDebugMap(d.normal, dir / (d.prefix + "normal.exr"));
+      WriteDebugMap(d.albedo, dir / (d.prefix + "albedo.exr"));
+      WriteDebugMap(d.height, dir / (d.prefix + "height.exr"));
+      WriteDebugMap(d.confidence, dir / (d.prefix + "confidence.exr"));
+      WriteDebugMap(d.residual, dir / (d.prefix + "residual.exr"));
+      for (const auto& [name, map] : d.fitted) WriteDebugMap(map, dir / (d.prefix + name + ".exr"));
+    }
+  }
+
+  report.total_seconds = StageClock() - run_start;
+  report.peak_memory_mib = static_cast<double>(PeakResidentBytes()) / (1024.0 * 1024.0);
+  WriteReportHtml(report, job.out_dir / "report.html");
+  WriteReportJson(report, job.out_dir / "report.json");  // last: marks the output complete
+  report.images.clear();  // thumbnails are in the HTML; keep the result light for batches
+  return result;
+}
+
+}  // namespace u3mscan

@@ -1,0 +1,54 @@
+#pragma once
+// ProcessCapture: one capture folder through calibration, rectification, reconstruction and
+// fitting to a complete U3M with its report (the `u3mscan process` command; docs/process.md).
+//
+// Output (into job.out_dir): <name>.u3m + textures/ (or <name>.u3ma), report.html, report.json and,
+// with debug_maps, maps/*.exr. The material is written atomically and report.json last, so a run
+// killed midway leaves no material that looks complete (IsOutputComplete) and nothing half-written.
+// Two runs on the same input with the same --id and --created write the same material.
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "core/progress.h"
+#include "pipeline/batch.h"
+#include "pipeline/presets.h"
+#include "pipeline/run_report.h"
+
+namespace u3mscan {
+
+struct ProcessOptions {
+  Preset preset = Preset::kBalanced;
+  std::string schema = "auto";          // auto | 1.0 | 1.1
+  bool package = false;                 // one .u3ma instead of .u3m + textures/
+  std::optional<double> dpi;            // overrides the manifest's output dpi
+  bool debug_maps = false;              // also write maps/*.exr (normal, albedo, height, confidence, fit maps)
+  std::optional<std::string> id;        // material id (lowercase v4 UUID); default: new random
+  std::optional<std::string> created;   // UTC "YYYY-MM-DDThh:mm:ssZ"; default: now
+  // Overrides of the preset's methods (empty = the preset's choice).
+  std::string solver;                   // ls | robust
+  std::string integrator;               // dct | robust
+  // Returns false and says why when an option is out of range.
+  bool Check(std::string* why) const;
+};
+
+struct ProcessResult {
+  std::filesystem::path material;
+  RunReport report;
+};
+
+// Throws InputError for bad input (the message names the file, field and expectation) and writes
+// nothing then; other exceptions are internal errors.
+ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& options, const ProgressCallback& progress = {});
+
+// The material file a job writes (<out_dir>/<name>.u3m or .u3ma).
+std::filesystem::path MaterialPathFor(const CaptureJob& job, const ProcessOptions& options);
+// True when the job's material and a report.json with status "ok" exist.
+bool IsOutputComplete(const CaptureJob& job, const ProcessOptions& options);
+
+// "2026-11-22T10:00:00Z" (optionally with .fff) -> UTC milliseconds; nullopt when malformed.
+std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text);
+
+}  // namespace u3mscan

@@ -1,0 +1,59 @@
+#pragma once
+// The pipeline's stages as functions on in-memory data, each timed into a RunReport. `process`,
+// `reconstruct`, `fit` and `bench` all run these same functions, so every command measures the
+// same code.
+//
+//   PrepareCapture  open + check the manifest, calibrate (dark/ambient, cameras, lights, flats, colour)
+//   BuildSideStack  one side's sample frames on the metric grid (core/stack.h)
+//   ReconstructSide photometric stereo + integration -> normal, albedo, confidence, height (mm)
+//   FitSide         Principled parameters with Ceres (fitting/principled_fit.h)
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "capture/calibrate.h"
+#include "capture/capture.h"
+#include "core/progress.h"
+#include "fitting/principled_fit.h"
+#include "pipeline/presets.h"
+#include "pipeline/run_report.h"
+#include "reconstruction/photometric_stereo.h"
+
+namespace u3mscan {
+
+struct PreparedCapture {
+  Capture capture;
+  CalibrationResult calibration;
+  std::vector<std::string> sides;  // sides with sample frames, "front" first
+};
+
+// Opens and calibrates. Throws InputError for a manifest or frame that does not pass.
+PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOptions& options, RunReport* report,
+                               const ProgressCallback& progress = {});
+
+Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
+                     RunReport* report, const ProgressCallback& progress = {});
+
+struct SideReconstruction {
+  reconstruction::PhotometricStereoResult photometric_stereo;
+  Image height_mm;  // integrated (distant lights) or refined with the near-light model
+  Image valid;      // 1 channel: 1 where the surface is data (not a hole, seen by the camera)
+};
+
+SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& options, const Image& alpha,
+                                   RunReport* report, const ProgressCallback& progress = {});
+
+fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
+                           RunReport* report, const ProgressCallback& progress = {});
+
+// Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
+// over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
+// observation is usable). `mean_out` receives the mean over usable pixels.
+Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
+                     int max_observations, double* mean_out);
+
+// Seconds since `start` (a steady clock reading from StageClock()).
+double StageClock();
+
+}  // namespace u3mscan

@@ -1,0 +1,181 @@
+// The `u3mscan process` command as an operator and a batch scheduler use it: exit codes, batches
+// with a broken capture, reproducible reruns, resumable batches, kills midway, GNU parallel.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "datasets_synthetic/capture_writer.h"
+#include "datasets_synthetic/rig.h"
+#include "e2e_scene.h"
+#include "u3m/validate.h"
+
+extern char** environ;
+
+namespace u3mscan {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ReadFile(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Runs a shell command line; returns its exit status (or 128 + signal).
+int RunShell(const std::string& command) {
+  const int status = std::system((command + " > /dev/null 2>&1").c_str());
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+std::string Quote(const fs::path& path) { return "'" + path.string() + "'"; }
+
+class ProcessCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = fs::temp_directory_path() / "u3mscan_process_cli";
+    fs::remove_all(root_);
+    fs::create_directories(root_ / "captures");
+    synthetic::RigOptions rig_options;
+    const synthetic::Rig rig = synthetic::MakeRig("distant", rig_options);
+    const auto scene = testing::BumpScene(56, 56, rig_options.pitch_mm, 0.05, 1.5);
+    synthetic::CaptureOptions capture_options;
+    capture_options.format = synthetic::FrameFormat::kTiff;
+    for (const char* name : {"a", "b"}) {
+      synthetic::WriteSyntheticCapture(scene, rig, capture_options, root_ / "synth" / name);
+      fs::rename(root_ / "synth" / name / "capture", root_ / "captures" / name);
+    }
+    // A broken capture: its manifest names a frame file that is not there.
+    fs::create_directories(root_ / "captures" / "broken");
+    fs::copy(root_ / "captures" / "a" / "capture.json", root_ / "captures" / "broken" / "capture.json");
+  }
+  static void TearDownTestSuite() { fs::remove_all(root_); }
+  static std::string Exe() { return U3MSCAN_EXECUTABLE; }
+  static fs::path root_;
+};
+fs::path ProcessCli::root_;
+
+constexpr const char* kFixedId = "3f2c1a9e-8b7d-4c6e-9a5f-0123456789ab";
+constexpr const char* kFixedTime = "2026-11-22T10:00:00Z";
+
+TEST_F(ProcessCli, BadUsageExitsTwo) {
+  EXPECT_EQ(RunShell(Exe() + " process"), 2);
+  EXPECT_EQ(RunShell(Exe() + " process " + Quote(root_ / "captures" / "a") + " -o " + Quote(root_ / "x") + " --preset turbo"), 2);
+  EXPECT_FALSE(fs::exists(root_ / "x"));
+}
+
+TEST_F(ProcessCli, BrokenCaptureIsReportedAndTheOthersFinish) {
+  const fs::path out = root_ / "batch";
+  EXPECT_EQ(RunShell(Exe() + " process --quiet --preset fast " + Quote(root_ / "captures") + " -o " + Quote(out)), 1);
+  EXPECT_TRUE(fs::exists(out / "a" / "a.u3m"));
+  EXPECT_TRUE(fs::exists(out / "b" / "b.u3m"));
+  EXPECT_FALSE(fs::exists(out / "broken" / "broken.u3m"));
+  EXPECT_FALSE(fs::exists(out / "broken" / "report.json")) << "bad input writes no partial output";
+  EXPECT_TRUE(ValidateMaterialFile(out / "a" / "a.u3m").valid());
+}
+
+TEST_F(ProcessCli, RerunWithFixedIdAndTimeWritesTheSameMaterial) {
+  const std::string common = " process --quiet --preset fast --id " + std::string(kFixedId) + " --created " + kFixedTime + " " +
+                             Quote(root_ / "captures" / "a");
+  ASSERT_EQ(RunShell(Exe() + common + " -o " + Quote(root_ / "run1")), 0);
+  ASSERT_EQ(RunShell(Exe() + common + " -o " + Quote(root_ / "run2")), 0);
+  EXPECT_EQ(ReadFile(root_ / "run1" / "a.u3m"), ReadFile(root_ / "run2" / "a.u3m"));
+  for (const auto& entry : fs::directory_iterator(root_ / "run1" / "textures")) {
+    EXPECT_EQ(ReadFile(entry.path()), ReadFile(root_ / "run2" / "textures" / entry.path().filename()))
+        << entry.path().filename();
+  }
+}
+
+TEST_F(ProcessCli, PackageAndSchemaOptions) {
+  ASSERT_EQ(RunShell(Exe() + " process --quiet --preset fast --package --schema 1.1 " + Quote(root_ / "captures" / "b") +
+                " -o " + Quote(root_ / "pkg")),
+            0);
+  const fs::path package = root_ / "pkg" / "b.u3ma";
+  ASSERT_TRUE(fs::exists(package));
+  const ValidationReport report = ValidateMaterialFile(package);
+  EXPECT_TRUE(report.valid());
+  EXPECT_EQ(report.version, SchemaVersion::k1_1);
+}
+
+TEST_F(ProcessCli, WrittenFilesPassTheOfficialSchemas) {
+  const fs::path schemas = fs::path(U3MSCAN_SHARED_DIR) / "reference" / "u3m";
+  if (!fs::exists(schemas / "1.1" / "u3m_schema.json")) {
+    GTEST_SKIP() << "official schemas not found under " << schemas << ": schema validation SKIPPED";
+  }
+  if (std::string(U3MSCAN_SYSTEM_PYTHON).empty()) GTEST_SKIP() << "no system python3: schema validation SKIPPED";
+  for (const char* schema : {"auto", "1.0", "1.1"}) {
+    const fs::path out = root_ / (std::string("schema_") + schema);
+    ASSERT_EQ(RunShell(Exe() + " process --quiet --preset fast --schema " + schema + " " + Quote(root_ / "captures" / "a") +
+                       " -o " + Quote(out)),
+              0);
+    EXPECT_EQ(RunShell(Quote(U3MSCAN_SYSTEM_PYTHON) + " " + Quote(U3MSCAN_SCHEMA_CHECKER) + " " + Quote(schemas) + " " +
+                       Quote(out / "a.u3m")),
+              0)
+        << "schema " << schema << ": run " << U3MSCAN_SCHEMA_CHECKER << " on " << out / "a.u3m" << " for details";
+  }
+  EXPECT_NE(ReadFile(root_ / "schema_auto" / "a.u3m").find("\"schema\": \"1.0\""), std::string::npos)
+      << "auto writes the lowest version that holds the content";
+}
+
+TEST_F(ProcessCli, SkipExistingResumesABatch) {
+  const fs::path out = root_ / "resume";
+  const std::string command = Exe() + " process --quiet --preset fast " + Quote(root_ / "captures" / "a") + " " +
+                              Quote(root_ / "captures" / "b") + " -o " + Quote(out);
+  ASSERT_EQ(RunShell(command), 0);
+  const auto stamp = fs::last_write_time(out / "a" / "a.u3m");
+  fs::remove(out / "b" / "report.json");  // as if the run had been killed before b finished
+  ASSERT_EQ(RunShell(command + " --skip-existing"), 0);
+  EXPECT_EQ(fs::last_write_time(out / "a" / "a.u3m"), stamp) << "complete output is not redone";
+  EXPECT_TRUE(fs::exists(out / "b" / "report.json"));
+}
+
+TEST_F(ProcessCli, KilledMidwayLeavesNoPartialMaterial) {
+  // Kill the process at several points of its run; whatever is left is either a complete material
+  // (report.json written last says ok and the U3M validates) or no material at all.
+  for (int delay_ms : {50, 200, 400, 700, 1000}) {
+    const fs::path out = root_ / ("killed_" + std::to_string(delay_ms));
+    const std::string capture = (root_ / "captures" / "a").string();
+    const std::string out_arg = out.string();
+    std::vector<char*> argv = {const_cast<char*>(U3MSCAN_EXECUTABLE), const_cast<char*>("process"),
+                               const_cast<char*>("--quiet"), const_cast<char*>(capture.c_str()),
+                               const_cast<char*>("-o"), const_cast<char*>(out_arg.c_str()), nullptr};
+    pid_t pid = 0;
+    ASSERT_EQ(posix_spawn(&pid, U3MSCAN_EXECUTABLE, nullptr, nullptr, argv.data(), environ), 0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    const bool material = fs::exists(out / "a.u3m");
+    if (material) {
+      EXPECT_TRUE(ValidateMaterialFile(out / "a.u3m").valid()) << "killed after " << delay_ms << " ms";
+    }
+    if (fs::exists(out / "report.json")) {
+      EXPECT_TRUE(material) << "report.json is written last";
+    }
+  }
+}
+
+TEST_F(ProcessCli, GnuParallelRecipeFromTheDocs) {
+  if (RunShell("command -v parallel") != 0) GTEST_SKIP() << "GNU parallel is not installed (tools/install-deps.sh installs it)";
+  const fs::path out = root_ / "parallel";
+  // docs/batch.md: one capture per job, each into its own folder, resumable with --skip-existing.
+  const std::string command = "cd " + Quote(root_ / "captures") + " && ls -d a b | parallel --will-cite -j 2 --halt never " +
+                              Exe() + " process --quiet --skip-existing {} -o " + Quote(out) + "/{}";
+  ASSERT_EQ(RunShell("bash -c \"" + command + "\""), 0);
+  EXPECT_TRUE(ValidateMaterialFile(out / "a" / "a.u3m").valid());
+  EXPECT_TRUE(ValidateMaterialFile(out / "b" / "b.u3m").valid());
+}
+
+}  // namespace
+}  // namespace u3mscan
