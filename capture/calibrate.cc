@@ -391,6 +391,12 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
         measured.push_back(rho);
       }
       const ColourFit fit = FitColourCorrection(measured, {reference.begin(), reference.end()});
+      if (!(fit.delta_e_after_mean < options.max_chart_delta_e)) {
+        std::ostringstream what;
+        what << "a 24-patch colour chart (found by " << locator << "); its patches do not match the chart: CIEDE2000 mean "
+             << fit.delta_e_after_mean << " even after a 3x3 fit (at most " << options.max_chart_delta_e << " expected)";
+        throw InputError(spec.file, "", what.str());
+      }
       const bool improves = fit.delta_e_after_mean < fit.delta_e_before_mean;
       result.colour = {true, improves, spec.file, locator, fit};
       std::ostringstream detail;
@@ -413,7 +419,8 @@ nlohmann::json Vector(const Eigen::Vector3d& v) { return nlohmann::json::array({
 
 bool CalibrationOptions::Check() const {
   return (side == "front" || side == "back") && (!dpi || *dpi > 0.0) && min_board_frames_for_intrinsics >= 3 &&
-         min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0;
+         min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0 &&
+         max_chart_delta_e > 0.0;
 }
 
 LightModel LightModelFromSpec(const LightSpec& spec) {

@@ -41,6 +41,9 @@ struct CalibrationOptions {
   bool use_mcc = true;                   // try cv::mcc before the known chart layout
   ChartLayout chart_layout;              // where the chart lies when mcc finds none
   bool apply_colour_correction = true;   // in BuildStack, when a chart was fitted
+  // A chart whose patches a 3x3 matrix cannot bring within this mean CIEDE2000 of the reference
+  // is not a chart (a blank frame, a wrong layout): "chart not found".
+  double max_chart_delta_e = 5.0;
   double min_flat_cos = 0.05;            // flat pixels with grazing light are not measured
   // Mirror spheres found in their frames rest on the sample plane (centre z = radius), or sit at
   // the height of the manifest's centre_mm when it gives one; false: the height is fitted too.

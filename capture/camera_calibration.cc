@@ -94,9 +94,7 @@ BoardObservation DetectBoard(const Image& frame_rgb, const BoardTarget& board, c
   const auto charuco = MakeBoard(board, frame_file);
   const cv::Mat grey = internal::GreyCopy(frame_rgb);
   // Stretch so that the board's white paper is near white whatever the exposure.
-  cv::Mat sorted = grey.reshape(1, 1).clone();
-  cv::sort(sorted, sorted, cv::SORT_ASCENDING);
-  const double white = sorted.empty() ? 1.0 : std::max(1e-6f, sorted.at<float>(0, sorted.cols * 99 / 100));
+  const double white = std::max(1e-6, internal::Quantile(grey, 0.99));
   const cv::Mat grey8 = internal::ToDisplay8(grey, white);
 
   std::vector<std::vector<cv::Point2f>> marker_corners;

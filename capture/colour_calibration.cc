@@ -125,20 +125,26 @@ double FindChartPitchMm(const Image& frame_rgb, const CameraModel& camera, const
 std::optional<std::vector<ChartPatch>> MeasureChartWithMcc(const Image& frame_rgb) {
   // mcc wants an 8-bit BGR photograph: sRGB-encode, white at the 99th percentile.
   cv::Mat grey = internal::GreyCopy(frame_rgb);
-  cv::Mat sorted = grey.reshape(1, 1).clone();
-  cv::sort(sorted, sorted, cv::SORT_ASCENDING);
-  const double white = std::max(1e-6f, sorted.at<float>(0, sorted.cols * 99 / 100));
+  const double white = std::max(1e-6, internal::Quantile(grey, 0.99));
   std::vector<cv::Mat> bgr = {internal::ToDisplay8(internal::PlaneView(frame_rgb, 2), white),
                               internal::ToDisplay8(internal::PlaneView(frame_rgb, 1), white),
                               internal::ToDisplay8(internal::PlaneView(frame_rgb, 0), white)};
   cv::Mat image;
   cv::merge(bgr, image);
+  // The detector needs a chart of some tens of pixels a patch, not 36 megapixels: it runs on a
+  // copy of at most kMccMaxSide pixels a side, and its box is scaled back (pixel centres kept).
+  constexpr int kMccMaxSide = 1600;
+  const double scale = std::min(1.0, static_cast<double>(kMccMaxSide) / std::max(image.cols, image.rows));
+  if (scale < 1.0) cv::resize(image, image, cv::Size(), scale, scale, cv::INTER_AREA);
   auto detector = cv::mcc::CCheckerDetector::create();
   if (!detector->process(image, cv::mcc::MCC24, 1)) return std::nullopt;
   const auto checker = detector->getBestColorChecker();
   if (!checker) return std::nullopt;
   std::vector<cv::Point2f> box = checker->getBox();
   if (box.size() != 4) return std::nullopt;
+  for (auto& corner : box) {
+    corner = cv::Point2f(static_cast<float>((corner.x + 0.5) / scale - 0.5), static_cast<float>((corner.y + 0.5) / scale - 0.5));
+  }
   // The long side of the box carries the 6 columns.
   if (cv::norm(box[1] - box[0]) < cv::norm(box[3] - box[0])) std::rotate(box.begin(), box.begin() + 1, box.end());
   const auto& reference = ClassicChartLinearSrgb();

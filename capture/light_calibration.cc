@@ -61,113 +61,133 @@ Eigen::Vector3d FindSphere(const cv::Mat& grey, const cv::Mat& grey8, const Came
   cv::Mat blurred;
   cv::GaussianBlur(grey8, blurred, cv::Size(5, 5), 1.5);
   std::vector<cv::Vec3f> circles;
-  cv::HoughCircles(blurred, circles, cv::HOUGH_GRADIENT, 1.0, expected_px, 100, 20,
+  // A coarser accumulator for large spheres: the circle only seeds the sub-pixel rim trace.
+  const double accumulator_ratio = std::max(1.0, expected_px / 40.0);
+  cv::HoughCircles(blurred, circles, cv::HOUGH_GRADIENT, accumulator_ratio, expected_px, 100, 20,
                    static_cast<int>(0.6 * expected_px), static_cast<int>(1.5 * expected_px + 1));
   std::ostringstream what;
   what << "a mirror sphere of radius " << sphere.radius_mm << " mm (about " << std::lround(expected_px)
        << " px across its radius) standing out from its background";
   if (circles.empty()) throw InputError(frame_file, "", what.str() + "; no circle found");
-  const double u0 = circles[0][0], v0 = circles[0][1], rho0 = circles[0][2];
-
-  // Sub-pixel rim: the strongest step of the radial profile, refined by a parabola.
-  constexpr int kAngles = 180;
+  // Sub-pixel rim: the strongest step of each radial profile around (u0, v0), refined by a
+  // parabola; rim points far from the median radius (a highlight or a shadow on the rim) dropped.
+  constexpr int kAngles = 360;
   constexpr double kStepPx = 0.25;
-  std::vector<Eigen::Vector2d> rim;
-  std::vector<double> rim_radius;
-  for (int a = 0; a < kAngles; ++a) {
-    const double angle = 2.0 * kPi * a / kAngles;
-    const double ca = std::cos(angle), sa = std::sin(angle);
+  auto trace = [&](double u0, double v0, double rho0) {
+    std::vector<Eigen::Vector2d> rim;
+    std::vector<double> rim_radius;
     const int samples = static_cast<int>(0.6 * rho0 / kStepPx);
-    std::vector<double> profile(samples);
     const double start = 0.7 * rho0;
-    for (int s = 0; s < samples; ++s) {
-      const double r = start + s * kStepPx;
-      profile[s] = SampleBilinear(grey, u0 + r * ca, v0 + r * sa);
+    std::vector<double> profile(std::max(samples, 0));
+    for (int a = 0; a < kAngles; ++a) {
+      const double angle = 2.0 * kPi * a / kAngles;
+      const double ca = std::cos(angle), sa = std::sin(angle);
+      for (int k = 0; k < samples; ++k) {
+        const double r = start + k * kStepPx;
+        profile[k] = SampleBilinear(grey, u0 + r * ca, v0 + r * sa);
+      }
+      auto gradient = [&](int k) { return std::abs(profile[k + 2] + profile[k + 1] - profile[k - 1] - profile[k - 2]); };
+      int best = -1;
+      double best_gradient = 0.0;
+      for (int k = 2; k + 2 < samples; ++k) {
+        const double g = gradient(k);
+        if (g > best_gradient) best_gradient = g, best = k;
+      }
+      if (best < 3 || best + 3 >= samples) continue;
+      const double gm = gradient(best - 1), g0 = gradient(best), gp = gradient(best + 1);
+      const double denominator = gm - 2.0 * g0 + gp;
+      const double offset = std::abs(denominator) > 1e-12 ? std::clamp(0.5 * (gm - gp) / denominator, -0.5, 0.5) : 0.0;
+      const double r = start + (best + offset) * kStepPx;
+      rim.emplace_back(u0 + r * ca, v0 + r * sa);
+      rim_radius.push_back(r);
     }
-    int best = -1;
-    double best_gradient = 0.0;
-    for (int s = 2; s + 2 < samples; ++s) {
-      const double g = std::abs(profile[s + 2] + profile[s + 1] - profile[s - 1] - profile[s - 2]);
-      if (g > best_gradient) best_gradient = g, best = s;
+    std::vector<Eigen::Vector3d> rays;
+    if (rim.size() < kAngles / 2) return rays;
+    std::vector<double> sorted = rim_radius;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    for (std::size_t i = 0; i < rim.size(); ++i) {
+      if (std::abs(rim_radius[i] - median) < 1.5) rays.push_back(camera.PixelRayInWorld(rim[i]));
     }
-    if (best < 3 || best + 3 >= samples) continue;
-    auto gradient = [&](int s) { return std::abs(profile[s + 2] + profile[s + 1] - profile[s - 1] - profile[s - 2]); };
-    const double gm = gradient(best - 1), g0 = gradient(best), gp = gradient(best + 1);
-    const double denominator = gm - 2.0 * g0 + gp;
-    const double offset = std::abs(denominator) > 1e-12 ? std::clamp(0.5 * (gm - gp) / denominator, -0.5, 0.5) : 0.0;
-    const double r = start + (best + offset) * kStepPx;
-    rim.emplace_back(u0 + r * ca, v0 + r * sa);
-    rim_radius.push_back(r);
-  }
-  if (rim.size() < kAngles / 2) throw InputError(frame_file, "", what.str() + "; its rim could not be traced");
-  // Drop rim points far from the median radius (the highlight or a shadow touching the rim).
-  std::vector<double> sorted = rim_radius;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double median = sorted[sorted.size() / 2];
-  std::vector<Eigen::Vector3d> rays;
-  for (std::size_t i = 0; i < rim.size(); ++i) {
-    if (std::abs(rim_radius[i] - median) < 1.5) rays.push_back(camera.PixelRayInWorld(rim[i]));
-  }
-  if (rays.size() < kAngles / 3) throw InputError(frame_file, "", what.str() + "; its rim is not round");
+    return rays;
+  };
 
-  // Start: the ray through the circle's centre at the distance the apparent radius implies.
   const Eigen::Vector3d origin = camera.CentreInWorld();
   const double f = 0.5 * (camera.intrinsics.fx + camera.intrinsics.fy);
-  const double distance = sphere.radius_mm / std::sin(std::atan(median / f));
-  Eigen::Vector3d centre = origin + distance * camera.PixelRayInWorld(Eigen::Vector2d(u0, v0));
-  if (centre_height_mm) {
-    // Known height: start where the ray through the circle's centre meets it.
-    const Eigen::Vector3d ray = camera.PixelRayInWorld(Eigen::Vector2d(u0, v0));
-    if (std::abs(ray.z()) > 1e-9) centre = origin + ((*centre_height_mm - origin.z()) / ray.z()) * ray;
-    centre.z() = *centre_height_mm;
-  }
-  // The apparent size fixes the sphere's distance only to about rim accuracy / radius in px (a
-  // hundredth of a pixel is 0.1 mm at 400 mm): with the height known, only x and y are fitted.
+  // With the height known, only x and y are fitted: the apparent size fixes the sphere's distance
+  // only to about rim accuracy / radius in px (a hundredth of a pixel is 0.1 mm at 400 mm).
   const int unknowns = centre_height_mm ? 2 : 3;
-  auto residuals = [&](const Eigen::Vector3d& c) {
-    Eigen::VectorXd r(rays.size());
-    for (std::size_t i = 0; i < rays.size(); ++i) r[i] = (c - origin).cross(rays[i]).norm() - sphere.radius_mm;
-    return r;
-  };
-  auto solve = [&](Eigen::Vector3d c) {
-    for (int iteration = 0; iteration < 30; ++iteration) {
-      const Eigen::VectorXd r = residuals(c);
-      Eigen::MatrixXd jacobian(rays.size(), unknowns);
-      for (int k = 0; k < unknowns; ++k) {
-        Eigen::Vector3d step = Eigen::Vector3d::Zero();
-        step[k] = 1e-4;
-        jacobian.col(k) = (residuals(c + step) - r) / 1e-4;
+  // The centre whose cone of tangent rays fits the rim rays: Gauss-Newton, then rim points beyond
+  // 3 robust sigmas (at least a tenth of a pixel) dropped and the fit repeated.
+  auto fit = [&](Eigen::Vector3d centre, std::vector<Eigen::Vector3d> rays) {
+    auto residuals = [&](const Eigen::Vector3d& c) {
+      Eigen::VectorXd r(rays.size());
+      for (std::size_t i = 0; i < rays.size(); ++i) r[i] = (c - origin).cross(rays[i]).norm() - sphere.radius_mm;
+      return r;
+    };
+    auto solve = [&](Eigen::Vector3d c) {
+      for (int iteration = 0; iteration < 30; ++iteration) {
+        const Eigen::VectorXd r = residuals(c);
+        Eigen::MatrixXd jacobian(rays.size(), unknowns);
+        for (int k = 0; k < unknowns; ++k) {
+          Eigen::Vector3d step = Eigen::Vector3d::Zero();
+          step[k] = 1e-4;
+          jacobian.col(k) = (residuals(c + step) - r) / 1e-4;
+        }
+        const Eigen::VectorXd solved = jacobian.colPivHouseholderQr().solve(-r);
+        Eigen::Vector3d delta = Eigen::Vector3d::Zero();
+        delta.head(unknowns) = solved;
+        c += delta;
+        if (delta.norm() < 1e-9) break;
       }
-      const Eigen::VectorXd solved = jacobian.colPivHouseholderQr().solve(-r);
-      Eigen::Vector3d delta = Eigen::Vector3d::Zero();
-      delta.head(unknowns) = solved;
-      c += delta;
-      if (delta.norm() < 1e-9) break;
+      return c;
+    };
+    const double px_per_mm_at_sphere = f / (centre - origin).norm();
+    for (int round = 0; round < 3; ++round) {
+      centre = solve(centre);
+      const Eigen::VectorXd r = residuals(centre);
+      std::vector<double> abs_r(r.size());
+      for (Eigen::Index i = 0; i < r.size(); ++i) abs_r[i] = std::abs(r[i]);
+      std::vector<double> sorted_r = abs_r;
+      std::nth_element(sorted_r.begin(), sorted_r.begin() + sorted_r.size() / 2, sorted_r.end());
+      const double limit = std::max(0.1 / px_per_mm_at_sphere, 3.0 * 1.4826 * sorted_r[sorted_r.size() / 2]);
+      std::vector<Eigen::Vector3d> kept;
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        if (abs_r[i] <= limit) kept.push_back(rays[i]);
+      }
+      if (kept.size() < kAngles / 3 || kept.size() == rays.size()) break;
+      rays = std::move(kept);
     }
-    return c;
-  };
-  // Rim points on a cast shadow or a reflection that touches the rim are off by a little; fit,
-  // drop what lies beyond 3 robust sigmas (at least a tenth of a pixel), fit again.
-  const double px_per_mm_at_sphere = f / (centre - origin).norm();
-  for (int round = 0; round < 3; ++round) {
     centre = solve(centre);
     const Eigen::VectorXd r = residuals(centre);
-    std::vector<double> abs_r(r.size());
-    for (Eigen::Index i = 0; i < r.size(); ++i) abs_r[i] = std::abs(r[i]);
-    std::vector<double> sorted_r = abs_r;
-    std::nth_element(sorted_r.begin(), sorted_r.begin() + sorted_r.size() / 2, sorted_r.end());
-    const double limit = std::max(0.1 / px_per_mm_at_sphere, 3.0 * 1.4826 * sorted_r[sorted_r.size() / 2]);
-    std::vector<Eigen::Vector3d> kept;
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      if (abs_r[i] <= limit) kept.push_back(rays[i]);
+    *edge_residual_px = std::sqrt(r.squaredNorm() / r.size()) * f / (centre - origin).norm();
+    return centre;
+  };
+
+  // Round 1 from the Hough circle; round 2 traces the rim again around the fitted sphere's image,
+  // so that the result does not depend on how well the circle was seeded.
+  double u0 = circles[0][0], v0 = circles[0][1], rho0 = circles[0][2];
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (int round = 0; round < 2; ++round) {
+    const std::vector<Eigen::Vector3d> rays = trace(u0, v0, rho0);
+    if (rays.size() < kAngles / 3) {
+      throw InputError(frame_file, "", what.str() + "; its rim could not be traced (not round, or too faint)");
     }
-    if (kept.size() < kAngles / 3 || kept.size() == rays.size()) break;
-    rays = std::move(kept);
+    if (round == 0) {
+      // Start: the ray through the circle's centre, at the known height or at the distance the
+      // apparent radius implies.
+      const Eigen::Vector3d ray = camera.PixelRayInWorld(Eigen::Vector2d(u0, v0));
+      centre = origin + sphere.radius_mm / std::sin(std::atan(rho0 / f)) * ray;
+      if (centre_height_mm && std::abs(ray.z()) > 1e-9) {
+        centre = origin + ((*centre_height_mm - origin.z()) / ray.z()) * ray;
+        centre.z() = *centre_height_mm;
+      }
+    }
+    centre = fit(centre, rays);
+    const Eigen::Vector2d image_centre_px = camera.Project(centre);
+    u0 = image_centre_px.x(), v0 = image_centre_px.y();
+    rho0 = ApparentRadiusPx(camera, centre, sphere.radius_mm);
   }
-  centre = solve(centre);
-  // Rim residual in pixels: the distance residual (mm at the sphere) times pixels per mm there.
-  const Eigen::VectorXd r = residuals(centre);
-  *edge_residual_px = std::sqrt(r.squaredNorm() / r.size()) * f / (centre - origin).norm();
   return centre;
 }
 
@@ -189,9 +209,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
     observation.centre_in_world_mm = *known_centre;
   } else {
     // The display image is stretched to the background so the dark sphere stands out against it.
-    cv::Mat sorted = grey.reshape(1, 1).clone();
-    cv::sort(sorted, sorted, cv::SORT_ASCENDING);
-    const double white = std::max(1e-6f, sorted.at<float>(0, sorted.cols * 90 / 100));
+    const double white = std::max(1e-6, internal::Quantile(grey, 0.90));
     observation.centre_in_world_mm =
         FindSphere(grey, internal::ToDisplay8(grey, white), camera, sphere, frame_file, centre_height_mm,
                    &observation.edge_residual_px);

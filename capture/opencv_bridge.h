@@ -25,6 +25,10 @@ inline cv::Mat GreyCopy(const Image& image) {
   return grey;
 }
 
+// The q-quantile (0..1) of a CV_32F image, from at most about a million evenly spread pixels (a
+// display stretch needs no more, and a 36-megapixel frame is not sorted).
+double Quantile(const cv::Mat& grey, double q);
+
 // Grey 8-bit image for the detectors (aruco, mcc, Hough): the linear value is sRGB-encoded and
 // stretched so that `white` maps to 255, as a photograph would be shown.
 cv::Mat ToDisplay8(const cv::Mat& grey_linear, double white);

@@ -30,6 +30,9 @@ constexpr int kSheenTint = static_cast<int>(FitParameter::kSheenTint);
 constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
 constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
 constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
+// A measured parameter whose posterior std at the final cluster solution exceeds this many max_std
+// is left out after all (end of the cluster fit).
+constexpr double kFinalStdFactor = 2.0;
 
 // Coarse start grid (roughness, specular, sheen). Roughness starts above sqrt(kMinAlpha) = 0.032,
 // where GGX's alpha clamp would zero its derivative.
@@ -509,6 +512,17 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     e.measured = decision.measured[i];
     e.std_dev = e.measured ? std_dev[i] : std::numeric_limits<double>::infinity();
     e.reason = decision.reason[i];  // for a measured parameter only a "weakly constrained" / "demanded" note
+    // The observability decision was taken before the last refit; a parameter that the final
+    // solution clearly no longer constrains (posterior std above twice max_std, e.g. specular on a
+    // near-black sample) is left out rather than reported as measured. Twice: the last refit
+    // moves the std a little, which alone is no reason to drop a parameter.
+    if (e.measured && !(std_dev[i] <= kFinalStdFactor * options.observability.max_std)) {
+      char buffer[160];
+      std::snprintf(buffer, sizeof buffer, "not constrained by this capture (posterior std %.3g > %.3g at the final solution)",
+                    std_dev[i], kFinalStdFactor * options.observability.max_std);
+      e.measured = false;
+      e.reason = buffer;
+    }
   }
   return fit;
 }

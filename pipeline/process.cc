@@ -256,6 +256,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         if (choice.reason.empty()) choice.reason = "uniform within noise";
       } else {
         choice.source = ParameterSource::kMeasured;
+        if (choice.reason.empty()) choice.reason = "fitted per pixel: varies more than its noise (texture)";
         choice.map = fit.parameter_maps[p];
         choice.map.set_pitch_mm(stack.grid.pitch_mm);
       }

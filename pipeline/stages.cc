@@ -9,6 +9,36 @@
 
 namespace u3mscan {
 
+namespace {
+
+// Degenerate captures that cannot give a material are refused (InputError) before any output.
+constexpr int kMinCameraPixels = 2;        // per image side: a 1-pixel image has no surface to measure
+constexpr int kMinDistinctLights = 3;      // photometric stereo needs three light directions
+// A sample frame whose mean signal, divided by the cosine of its light at the sample centre, is
+// below this fraction of the median of the side's frames carries no signal (a light that did not
+// fire, a lens cap): it is left out with a warning instead of pulling every pixel toward black.
+constexpr double kNoSignalFraction = 0.02;
+constexpr double kMinLightCosine = 0.05;   // floor of that cosine (lights at grazing elevations)
+
+std::string ManifestPath(const PreparedCapture& prepared) { return (prepared.capture.folder() / kManifestFileName).string(); }
+
+// Mean of the observation's unflagged pixels over the colour channels, per unit cosine of its light.
+double SignalPerCosine(const Stack& stack, const Observation& o) {
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < o.rgb.pixel_count(); ++i) {
+    if (!o.flags.empty() && o.flags[i] != 0) continue;
+    sum += o.rgb.plane(0)[i] + o.rgb.plane(1)[i] + o.rgb.plane(2)[i];
+    ++n;
+  }
+  const LightModel& light = stack.lights[static_cast<std::size_t>(o.light)];
+  const Eigen::Vector3d centre(0.0, 0.0, 0.0);
+  const double cosine = std::max(kMinLightCosine, light.DirectionFrom(centre).z());
+  return n ? sum / (3.0 * static_cast<double>(n)) / cosine : 0.0;
+}
+
+}  // namespace
+
 double StageClock() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
@@ -28,6 +58,32 @@ PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOp
   }
   if (sides.empty()) {
     throw InputError((capture.folder() / "capture.json").string(), "/frames", "at least one frame with role \"sample\"");
+  }
+  const Manifest& manifest = capture.manifest();
+  for (std::size_t c = 0; c < manifest.cameras.size(); ++c) {
+    const CameraSpec& camera = manifest.cameras[c];
+    if (camera.width < kMinCameraPixels || camera.height < kMinCameraPixels) {
+      throw InputError((capture.folder() / kManifestFileName).string(), "/cameras/" + std::to_string(c),
+                       "a camera image of at least " + std::to_string(kMinCameraPixels) + " x " +
+                           std::to_string(kMinCameraPixels) + " pixels, got " + std::to_string(camera.width) + " x " +
+                           std::to_string(camera.height));
+    }
+  }
+  for (const std::string& side : sides) {
+    FrameFilter filter;
+    filter.role = FrameRole::kSample;
+    filter.side = side;
+    std::vector<std::string> lights;
+    for (std::size_t index : capture.Frames(filter)) {
+      const auto& light = capture.frame(index).light;
+      if (light && std::find(lights.begin(), lights.end(), *light) == lights.end()) lights.push_back(*light);
+    }
+    if (static_cast<int>(lights.size()) < kMinDistinctLights) {
+      throw InputError((capture.folder() / kManifestFileName).string(), "/frames",
+                       "sample frames of side " + side + " under at least " + std::to_string(kMinDistinctLights) +
+                           " different lights (photometric stereo needs three light directions), got " +
+                           std::to_string(lights.size()));
+    }
   }
   if (sides.size() == 1 && sides[0] == "front") {
     report->steps.push_back({"back side", false, "the capture has no back-side sample frames: back = front", 0.0});
@@ -51,6 +107,56 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
   CalibrationOptions calibration_options = options.calibration;
   calibration_options.side = side;
   Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress);
+
+  // Frames without signal are left out (see kNoSignalFraction).
+  if (stack.observations.size() >= 2) {
+    std::vector<double> signal(stack.observations.size());
+    for (std::size_t k = 0; k < signal.size(); ++k) signal[k] = SignalPerCosine(stack, stack.observations[k]);
+    std::vector<double> sorted = signal;
+    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    std::vector<Observation> kept;
+    for (std::size_t k = 0; k < signal.size(); ++k) {
+      if (median > 0.0 && signal[k] < kNoSignalFraction * median) {
+        const Observation& o = stack.observations[k];
+        report->warnings.push_back("side " + side + ", light " + stack.lights[static_cast<std::size_t>(o.light)].id +
+                                   ", view " + stack.views[static_cast<std::size_t>(o.view)].camera_id +
+                                   ": the sample frame carries no signal (" + std::to_string(signal[k] / median) +
+                                   " of the median frame): left out; did the light fire?");
+        continue;
+      }
+      kept.push_back(std::move(stack.observations[k]));
+    }
+    stack.observations = std::move(kept);
+  }
+  std::vector<int> lights;
+  for (const Observation& o : stack.observations) {
+    if (std::find(lights.begin(), lights.end(), o.light) == lights.end()) lights.push_back(o.light);
+  }
+  if (static_cast<int>(lights.size()) < kMinDistinctLights) {
+    throw InputError(ManifestPath(prepared), "/frames",
+                     "sample frames of side " + side + " with signal under at least " +
+                         std::to_string(kMinDistinctLights) + " different lights, got " + std::to_string(lights.size()) +
+                         " (the others are black: check that the lights fire and the lens is open)");
+  }
+  // The fit needs pixels with enough unsaturated observations; none at all means the capture is
+  // overexposed (or its frames are black) and no material can be measured from it.
+  const std::size_t pixels = static_cast<std::size_t>(stack.grid.width) * stack.grid.height;
+  std::size_t usable_pixels = 0;
+  for (std::size_t i = 0; i < pixels && usable_pixels == 0; ++i) {
+    int usable = 0;
+    for (const Observation& o : stack.observations) {
+      if (!o.flags.empty() && o.flags[i] != 0) continue;
+      if (o.rgb.plane(0)[i] + o.rgb.plane(1)[i] + o.rgb.plane(2)[i] > 0.0f) ++usable;
+    }
+    if (usable >= options.fit.min_observations) ++usable_pixels;
+  }
+  if (usable_pixels == 0) {
+    throw InputError(ManifestPath(prepared), "/frames",
+                     "sample frames of side " + side + " where some pixels are lit and unsaturated under at least " +
+                         std::to_string(options.fit.min_observations) +
+                         " lights; every pixel is saturated or black in too many frames (lower the exposure or the light intensity)");
+  }
   report->steps.push_back({"rectify " + side, true,
                            std::to_string(stack.observations.size()) + " observations on a " +
                                std::to_string(stack.grid.width) + "x" + std::to_string(stack.grid.height) + " grid",
@@ -71,6 +177,10 @@ SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& optio
                            near ? "near point lights, height refined " + std::to_string(ps.near_iterations) + " rounds"
                                 : "distant lights",
                            StageClock() - start});
+  if (!near) {
+    report->steps.push_back({"near-light refinement", false,
+                             "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
+  }
 
   // Valid surface: seen by the camera and not a hole (alpha >= 0.5).
   out.valid = Image(stack.grid.width, stack.grid.height, 1, 1.0f, stack.grid.pitch_mm);
@@ -97,6 +207,10 @@ SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& optio
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
+  if (stack.views.size() < 2) {
+    report->steps.push_back({"oblique view", false,
+                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
+  }
   const double start = StageClock();
   fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
                                    geometry.height_mm};

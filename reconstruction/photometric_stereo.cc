@@ -2,10 +2,12 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <vector>
@@ -42,7 +44,8 @@ bool PhotometricStereoOptions::Check() const {
          band_low_fraction + band_high_fraction < 1.0 && residual_quantile > 0.0 && residual_quantile < 1.0 && irls_iterations >= 0 && min_residual_fraction > 0.0 &&
          good_condition >= 1.0 && max_condition > good_condition && max_reported_condition >= max_condition &&
          reliable_albedo > 0.0 && min_normal_z > 0.0 && min_normal_z < 1.0 && residual_tolerance > 0.0 &&
-         regularisation > 0.0 && max_near_iterations >= 0 && near_tolerance_deg > 0.0 && integration.Check();
+         regularisation > 0.0 && regularise_below_confidence >= 0.0 && regularise_below_confidence <= 1.0 &&
+         max_near_iterations >= 0 && near_tolerance_deg > 0.0 && integration.Check();
 }
 
 namespace {
@@ -54,6 +57,9 @@ using Eigen::Vector3d;
 // comes from broken input such as a near-zero measured irradiance).
 constexpr double kMaxAlbedo = 1e6;
 
+// Smallest cosine the albedo of a regularised pixel assumes for its observations (84 deg).
+constexpr double kRegularisedCosFloor = 0.1;
+
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
   kDark = 1u << 0,
@@ -61,7 +67,10 @@ enum PixelState : std::uint8_t {
   kLowAlbedo = 1u << 2,
   kClamped = 1u << 3,
   kRegularised = 1u << 4,
+  kLowConfidence = 1u << 5,  // pass-1 confidence below regularise_below_confidence
 };
+// Pixels whose first-pass estimate is not to be trusted alone: re-solved with the neighbour prior.
+constexpr std::uint8_t kNeedsNeighbours = kDark | kIllConditioned | kLowAlbedo | kLowConfidence;
 
 // One observation at the current pixel. Lives in a per-chunk scratch array: no per-pixel allocation.
 struct PixelObservation {
@@ -263,12 +272,15 @@ class Solver {
   }
 
   // Per-channel albedo for a fixed normal: rho_c = pi * sum w rgb_c m / sum w m^2, m = max(0, s.n).
-  static Vector3d AlbedoFor(const std::vector<PixelObservation>& obs, const Vector3d& n) {
+  // cos_floor > 0 bounds the cosine from below (m >= cos_floor |s|): for a normal that came from the
+  // neighbours rather than the data, a light nearly perpendicular to it would otherwise turn its
+  // observation into an unbounded albedo.
+  static Vector3d AlbedoFor(const std::vector<PixelObservation>& obs, const Vector3d& n, double cos_floor = 0.0) {
     Vector3d num = Vector3d::Zero();
     double den = 0.0;
     for (const auto& o : obs) {
       if (o.weight <= 0.0) continue;
-      const double m = std::max(0.0, o.s.dot(n));
+      const double m = std::max(cos_floor * o.s.norm(), o.s.dot(n));
       num += o.weight * m * o.rgb;
       den += o.weight * m * m;
     }
@@ -315,7 +327,8 @@ class Solver {
 
   // The pixel's final normal, albedo and confidence from its weighted system. prior: the
   // neighbours' normal, used when the pixel needs regularisation (null in the first pass).
-  void Finish(Scratch& scratch, const PixelSystem& sys, const Vector3d* prior, PixelEstimate& est, Vector3d& albedo) const {
+  void Finish(Scratch& scratch, const PixelSystem& sys, const Vector3d* prior, PixelEstimate& est, Vector3d& albedo,
+              bool low_confidence = false) const {
     const auto& obs = scratch.obs;
     est.condition = sys.Condition(options_.max_reported_condition);
     est.used = 0;
@@ -329,10 +342,10 @@ class Solver {
     const double albedo_grey = std::numbers::pi * bg.norm();
     const bool low_albedo = albedo_grey < options_.reliable_albedo;
     if (low_albedo) est.state |= kLowAlbedo;
-    if (prior != nullptr && (ill || low_albedo)) {
+    if (prior != nullptr && (ill || low_albedo || low_confidence)) {
       // Tikhonov toward rho_prior * n_prior: the data fixes what it constrains, the neighbours the rest.
-      const Vector3d rho_prior = AlbedoFor(obs, *prior) / std::numbers::pi;
-      const double strength = ill ? 1.0 : 1.0 - albedo_grey / options_.reliable_albedo;
+      const Vector3d rho_prior = AlbedoFor(obs, *prior, kRegularisedCosFloor) / std::numbers::pi;
+      const double strength = ill || low_confidence ? 1.0 : 1.0 - albedo_grey / options_.reliable_albedo;
       const double lambda = options_.regularisation * strength * std::max(sys.eigenvalues(2), 1e-300);
       b = sys.Solve(lambda, *prior * rho_prior.transpose());
       bg = b.rowwise().mean();
@@ -345,7 +358,7 @@ class Solver {
       n = prior != nullptr ? *prior : Vector3d::UnitZ();
     }
     const double nz_factor = ClampNormal(n, est.state);
-    albedo = AlbedoFor(obs, n);
+    albedo = AlbedoFor(obs, n, (est.state & kRegularised) ? kRegularisedCosFloor : 0.0);
 
     const double count_factor = est.used < 3 ? 0.0 : (est.used == 3 ? 0.5 : 1.0);
     const double rel = RelativeResidual(obs, n, albedo) / options_.residual_tolerance;
@@ -499,6 +512,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
         } else {
           solver.Weigh(scratch, sys);
           solver.Finish(scratch, sys, nullptr, est, albedo);
+          if (est.confidence < options.regularise_below_confidence) est.state |= kLowConfidence;
         }
         store(i, est, albedo);
       }
@@ -508,13 +522,13 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   std::vector<float> reliable(n);
   bool any_unreliable = false;
   for (std::size_t i = 0; i < n; ++i) {
-    const bool needs = (state[i] & (kDark | kIllConditioned | kLowAlbedo)) != 0;
+    const bool needs = (state[i] & kNeedsNeighbours) != 0;
     reliable[i] = needs ? 0.0f : res.confidence.data()[i];
     any_unreliable |= needs;
   }
   if (any_unreliable) {
     std::vector<std::uint8_t> needs(n);
-    for (std::size_t i = 0; i < n; ++i) needs[i] = (state[i] & (kDark | kIllConditioned | kLowAlbedo)) != 0;
+    for (std::size_t i = 0; i < n; ++i) needs[i] = (state[i] & kNeedsNeighbours) != 0;
     const Image prior = NeighbourPrior(res.normal, reliable, needs, w, h);
     ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
       Scratch scratch(solver.observation_count());
@@ -522,7 +536,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
       for (std::size_t r = r0; r < r1; ++r)
         for (int c = 0; c < w; ++c) {
           const std::size_t i = r * w + c;
-          if (reliable[i] > 0.0f || (state[i] & (kDark | kIllConditioned | kLowAlbedo)) == 0) continue;
+          if ((state[i] & kNeedsNeighbours) == 0) continue;
           const Vector3d p(prior.data()[i], prior.data()[n + i], prior.data()[2 * n + i]);
           PixelEstimate est;
           Vector3d albedo = Vector3d::Zero();
@@ -533,7 +547,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
           } else {
             solver.Gather(static_cast<int>(r), c, height_at(i), scratch);
             solver.Weigh(scratch, sys);
-            solver.Finish(scratch, sys, &p, est, albedo);
+            solver.Finish(scratch, sys, &p, est, albedo, (state[i] & kLowConfidence) != 0);
           }
           store(i, est, albedo);
         }
@@ -576,12 +590,21 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   if (solver.has_point_lights() && options.refine_height) {
     IntegrationOptions integration = options.integration;
     integration.pitch_mm = stack.grid.pitch_mm;
+    double previous_change = std::numeric_limits<double>::infinity();
     for (int it = 1; it <= options.max_near_iterations; ++it) {
       ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
       // Confidence as integration weights: unreliable normals do not bend the height.
       Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
       PhotometricStereoResult next = SolveAt(solver, stack, options, height);
       const double change = MeanAngleDeg(next.normal, result.normal);
+      if (change >= previous_change) {
+        // Not converging (normals too unreliable to place the surface): keep the last round,
+        // whose change was the smallest.
+        LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
+                     << " deg after " << previous_change << " deg); kept round " << it - 1;
+        break;
+      }
+      previous_change = change;
       result = std::move(next);
       result.height_mm = std::move(height);
       result.near_iterations = it;

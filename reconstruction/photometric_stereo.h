@@ -73,6 +73,9 @@ struct PhotometricStereoOptions {
   // Weight of the neighbour prior for ill-conditioned pixels, relative to the largest eigenvalue
   // of their light system (Tikhonov regularisation toward rho * n_prior).
   double regularisation = 0.1;
+  // Pixels whose own confidence is below this are regularised the same way (e.g. grazing lights
+  // that leave a few nearly coplanar ones after shadows: n flips toward the horizon).
+  double regularise_below_confidence = 0.1;
 
   // Near point lights: height refinement stops when the mean change of the normals between two
   // rounds is below this, or after max_near_iterations rounds.

@@ -58,6 +58,14 @@ for target in "${targets[@]}"; do
   # The copy grows as libFuzzer finds new paths and is kept for the next run; the seeds in the
   # source tree are never written.
   cp -n "$seeds"/* "$work/corpus/" 2>/dev/null || true
+  # The checked-in bad inputs of tests/hostile are seeds too: they reach the refusal paths.
+  case "$corpus_name" in
+    manifest) hostile=$source_dir/tests/hostile/manifest ;;
+    u3m_json) hostile=$source_dir/tests/hostile/u3m ;;
+    u3ma) hostile=$source_dir/tests/hostile/u3ma ;;
+    *) hostile= ;;
+  esac
+  [ -n "$hostile" ] && [ -d "$hostile" ] && for f in "$hostile"/*; do cp -n "$f" "$work/corpus/hostile_$(basename "$f")"; done
   dict_args=()
   [ -f "$source_dir/tests/fuzz/$corpus_name.dict" ] && dict_args=(-dict="$source_dir/tests/fuzz/$corpus_name.dict")
   log=$work/fuzz.log

@@ -235,6 +235,19 @@ TEST(Calibrate, BadSphereAndFlatFallBackWithMessagesNamingTheFrames) {
   EXPECT_EQ(result.cameras[0].pose_source, "manifest");
 }
 
+TEST(Calibrate, ChartNotFoundSkipsColourWithAMessageNamingTheFrame) {
+  TinyCapture capture = TinyCapture::Shared();
+  for (auto& [index, image] : capture.frames) {
+    if (capture.manifest.frames[index].role == FrameRole::kChart) image = Image(320, 240, 3, 0.1f);
+  }
+  const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), TestOptions());
+  EXPECT_FALSE(result.colour.fitted);
+  std::string all;
+  for (const auto& w : result.warnings) all += w + "\n";
+  EXPECT_NE(all.find("chart.tif"), std::string::npos) << all;
+  EXPECT_NE(all.find("colour chart"), std::string::npos) << all;
+}
+
 TEST(Calibrate, CaptureFolderOnDiskGivesTheSameCalibration) {
   // The Capture overloads (what `u3mscan calibrate` runs): frames as float EXR, the manifest
   // written by WriteManifest, read back by Capture::Open.

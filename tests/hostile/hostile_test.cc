@@ -25,6 +25,7 @@ namespace {
 constexpr int kExitOk = 0;
 constexpr int kExitInvalid = 1;
 constexpr int kExitUnreadable = 2;
+constexpr int kExitCaptureFailed = 1;  // `process`: some capture failed (bad usage is 2)
 
 constexpr int kFrameSide = 32;         // the cameras of manifest/valid.json
 constexpr int kNestingDepth = 100000;  // far deeper than any recursive parser's stack allows
@@ -452,6 +453,45 @@ TEST_P(HostileFrame, CalibrateRefusesAndWritesNothing) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Corpus, HostileFrame, ::testing::ValuesIn(BadFrameCases()), CaseName);
+
+}  // namespace
+}  // namespace u3mscan::hostile
+
+namespace u3mscan::hostile {
+namespace {
+
+// `process` (the main job) on a few representative bad captures: a traversal in capture.json, a
+// truncated PNG frame and a text file named .dng. The batch driver reports the capture as failed
+// (exit 1) with the reason, and writes no material, texture or report for it.
+TEST(HostileProcess, BadCapturesFailCleanlyAndWriteNothing) {
+  TempDir tmp;
+  struct Bad {
+    std::string kind, image, manifest, mention;
+  };
+  const std::vector<Bad> bad = {{"traversal", "", "traversal_frame.json", "/frames/0/file"},
+                                {"truncated_png", "truncated_after_header.png", "", "truncated_after_header.png"},
+                                {"text_dng", "text_named.dng", "", "text_named.dng"}};
+  std::vector<RunSpec> runs;
+  for (const Bad& b : bad) {
+    const fs::path capture = tmp.path() / b.kind / "capture";
+    WriteValidCapture(capture);
+    if (!b.manifest.empty())
+      fs::copy_file(CorpusDir() / "manifest" / b.manifest, capture / "capture.json", fs::copy_options::overwrite_existing);
+    if (!b.image.empty()) {
+      fs::copy_file(CorpusDir() / "images" / b.image, capture / "frames" / b.image);
+      fs::remove(capture / "frames" / "sample_0.png");
+      RenameFrame0(capture, b.image);
+    }
+    runs.push_back({{"process", capture.string(), "-o", (tmp.path() / b.kind / "out").string(), "--quiet"},
+                    tmp.path() / b.kind / "t"});
+  }
+  const std::vector<RunResult> results = RunU3mscanAll(runs);
+  for (std::size_t i = 0; i < bad.size(); ++i) {
+    EXPECT_TRUE(CleanExit(results[i], kExitCaptureFailed, {"FAILED", bad[i].mention})) << bad[i].kind;
+    EXPECT_TRUE(NothingIn(tmp.path() / bad[i].kind / "out")) << bad[i].kind;
+    EXPECT_TRUE(NothingIn(tmp.path() / bad[i].kind / "t")) << bad[i].kind;
+  }
+}
 
 }  // namespace
 }  // namespace u3mscan::hostile
