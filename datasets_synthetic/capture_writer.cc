@@ -233,6 +233,9 @@ json RigTruth(const SceneTruth& scene, const Rig& rig, const CaptureOptions& opt
       {"seed", rig.seed},
       {"frame_format", FrameFormatName(options.format)},
       {"sample_rect_mm", {-half_w, -half_h, half_w, half_h}},
+      // The scene's own grid frame (truth "grid": x = col p, y = -row p) sits shifted in the
+      // capture's world so that the sample is centred on the origin: world = scene + this.
+      {"world_from_scene_translation_mm", {-half_w + 0.5 * scene.pitch_mm, half_h - 0.5 * scene.pitch_mm, 0.0}},
       {"sample_pitch_mm", scene.pitch_mm},
       {"cameras", cams},
       {"lights", lights},
