@@ -281,6 +281,40 @@ void WriteFrame(const RawFrame& raw, const SensorSpec& sensor, FrameFormat forma
   WriteImageFile(RawToLinear(raw, sensor), path, w);
 }
 
+// Hand-made scenes (tests) may leave maps empty; the renderer reads those as its defaults, and the
+// truth must hold what was rendered, so they are filled with the same defaults before writing.
+bool HasEveryMap(const SceneTruth& s) {
+  for (const Image* m : {&s.height_mm, &s.normal, &s.base_color, &s.roughness, &s.specular, &s.specular_tint, &s.sheen,
+                         &s.sheen_tint, &s.metallic, &s.anisotropic, &s.alpha, &s.tangent}) {
+    if (m->empty()) return false;
+  }
+  return true;
+}
+
+SceneTruth CompletedScene(const SceneTruth& scene) {
+  SceneTruth s = scene;
+  const int w = s.height_mm.width(), h = s.height_mm.height();
+  const double p = s.pitch_mm;
+  auto fill = [&](Image& m, std::initializer_list<float> values) {
+    if (!m.empty()) return;
+    m = Image(w, h, static_cast<int>(values.size()), 0.0f, p);
+    int c = 0;
+    for (float v : values) std::fill(m.plane(c).begin(), m.plane(c).end(), v), ++c;
+  };
+  fill(s.normal, {0.0f, 0.0f, 1.0f});
+  fill(s.base_color, {0.8f, 0.8f, 0.8f});
+  fill(s.roughness, {0.5f});
+  fill(s.specular, {0.5f});
+  fill(s.specular_tint, {0.0f});
+  fill(s.sheen, {0.0f});
+  fill(s.sheen_tint, {0.0f});
+  fill(s.metallic, {0.0f});
+  fill(s.anisotropic, {0.0f});
+  fill(s.alpha, {1.0f});
+  fill(s.tangent, {1.0f, 0.0f, 0.0f});
+  return s;
+}
+
 // A frame's noise stream is named by its path without the extension, so the DNG, TIFF and EXR
 // captures of one seed carry the same noise.
 std::string NoiseName(const std::string& file) { return fs::path(file).replace_extension().generic_string(); }
@@ -312,8 +346,10 @@ void WriteEverything(const SceneTruth& scene, const Rig& rig, const CaptureOptio
   const fs::path truth_dir = root / kTruthSubdir;
   if (truth_writer) {
     truth_writer(scene, extra, truth_dir);
-  } else {
+  } else if (HasEveryMap(scene)) {
     WriteTruth(scene, extra, truth_dir);
+  } else {
+    WriteTruth(CompletedScene(scene), extra, truth_dir);
   }
 }
 

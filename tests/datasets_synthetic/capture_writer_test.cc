@@ -224,6 +224,15 @@ TEST_F(CaptureWriterTest, SameSeedGivesIdenticalFiles) {
   EXPECT_FALSE(ca == cc);
 }
 
+// Maps a hand-made scene leaves empty are rendered with defaults and written as such.
+TEST_F(CaptureWriterTest, SceneWithEmptyMapsStillWritesItsTruth) {
+  scene_.tangent = Image();
+  scene_.sheen = Image();
+  const fs::path dir = Write("sparse", FrameFormat::kExr);
+  EXPECT_TRUE(fs::exists(dir / kTruthSubdir / "tangent.exr"));
+  EXPECT_TRUE(fs::exists(dir / kTruthSubdir / "sheen.exr"));
+}
+
 TEST_F(CaptureWriterTest, FailureLeavesNoPartialOutput) {
   const fs::path dir = root_ / "failed";
   CaptureOptions options;
