@@ -16,9 +16,14 @@ constexpr double kTargetFillOfView = 0.85;  // printed targets cover this much o
 constexpr double kBoardBlack = 0.04, kBoardWhite = 0.9;
 constexpr double kChartBodyAlbedo = 0.03;
 constexpr double kMarkerPerSquare = 0.7;
-// Camera pixels per board square we aim for (min 3 squares a side): 40 keeps the markers legible
-// to the oblique camera, which sees squares foreshortened to half their height (24 did not).
-constexpr double kPixelsPerSquare = 40.0;
+// Camera pixels per board square we aim for (min 3 squares a side). Many small squares pin the
+// top camera's pose best (its narrow field of view leaves tilt and shift hard to tell apart:
+// 20 corners gave 0.9 deg light-direction errors at 320x240, 70 corners far less); a rig with a
+// tilted camera needs larger ones so that camera still reads the foreshortened markers (at 24 px
+// the oblique camera at 60 deg found fewer than 4 corners at 480x360).
+constexpr double kPixelsPerSquare = 24.0;
+constexpr double kPixelsPerSquareTiltedCamera = 40.0;
+constexpr double kTiltedCameraDeg = 30.0;
 constexpr int kTargetSamplesPerAxis = 3;  // anti-aliasing of printed edges
 constexpr int kSphereSamplesPerAxis = 4;  // the highlight is a few pixels: its centroid must be sub-pixel
 // Chart layout in patch sizes: gaps between patches and the black border around them.
@@ -62,10 +67,15 @@ CalibrationTargets MakeCalibrationTargets(const Rig& rig) {
   CalibrationTargets t;
   const Eigen::Vector2d view = ViewSizeMm(rig);
   const RigCamera& cam = rig.cameras.at(0);
-  // Board: as many squares as keep ~40 camera pixels each, 3..12 per side, all inside the view.
+  // Board: as many squares as keep ~24 (40 with a tilted camera) camera pixels each, 3..12 per
+  // side, all inside the view.
   BoardSpec& b = t.board;
-  b.squares_x = std::clamp(static_cast<int>(kTargetFillOfView * cam.width / kPixelsPerSquare), 3, 12);
-  b.squares_y = std::clamp(static_cast<int>(kTargetFillOfView * cam.height / kPixelsPerSquare), 3, 12);
+  const bool tilted = std::any_of(rig.cameras.begin(), rig.cameras.end(), [](const RigCamera& c) {
+    return -c.world_from_camera.col(2).z() < std::cos(kTiltedCameraDeg * 3.14159265358979323846 / 180.0);
+  });
+  const double px_per_square = tilted ? kPixelsPerSquareTiltedCamera : kPixelsPerSquare;
+  b.squares_x = std::clamp(static_cast<int>(kTargetFillOfView * cam.width / px_per_square), 3, 12);
+  b.squares_y = std::clamp(static_cast<int>(kTargetFillOfView * cam.height / px_per_square), 3, 12);
   b.square_mm = kTargetFillOfView * std::min(view.x() / b.squares_x, view.y() / b.squares_y);
   b.marker_mm = kMarkerPerSquare * b.square_mm;
   b.dictionary = "DICT_5X5_100";  // 100 markers >= 12 x 12 / 2
