@@ -16,8 +16,9 @@ constexpr double kTargetFillOfView = 0.85;  // printed targets cover this much o
 constexpr double kBoardBlack = 0.04, kBoardWhite = 0.9;
 constexpr double kChartBodyAlbedo = 0.03;
 constexpr double kMarkerPerSquare = 0.7;
-// Camera pixels per board square we aim for; fewer squares on tiny frames (min 3).
-constexpr double kPixelsPerSquare = 24.0;
+// Camera pixels per board square we aim for (min 3 squares a side): 40 keeps the markers legible
+// to the oblique camera, which sees squares foreshortened to half their height (24 did not).
+constexpr double kPixelsPerSquare = 40.0;
 constexpr int kTargetSamplesPerAxis = 3;  // anti-aliasing of printed edges
 constexpr int kSphereSamplesPerAxis = 4;  // the highlight is a few pixels: its centroid must be sub-pixel
 // Chart layout in patch sizes: gaps between patches and the black border around them.
@@ -61,7 +62,7 @@ CalibrationTargets MakeCalibrationTargets(const Rig& rig) {
   CalibrationTargets t;
   const Eigen::Vector2d view = ViewSizeMm(rig);
   const RigCamera& cam = rig.cameras.at(0);
-  // Board: as many squares as keep ~24 camera pixels each, 3..12 per side, all inside the view.
+  // Board: as many squares as keep ~40 camera pixels each, 3..12 per side, all inside the view.
   BoardSpec& b = t.board;
   b.squares_x = std::clamp(static_cast<int>(kTargetFillOfView * cam.width / kPixelsPerSquare), 3, 12);
   b.squares_y = std::clamp(static_cast<int>(kTargetFillOfView * cam.height / kPixelsPerSquare), 3, 12);

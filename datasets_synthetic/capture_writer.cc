@@ -18,6 +18,7 @@
 #include "datasets_synthetic/calibration_frames.h"
 #include "datasets_synthetic/renderer.h"
 #include "datasets_synthetic/sensor.h"
+#include "datasets_synthetic/truth_writer.h"
 #include "u3m/image_io.h"
 
 namespace u3mscan::synthetic {
@@ -26,6 +27,9 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using nlohmann::json;
+
+// 2020-01-01 00:00:00 UTC, the DateTime of every synthetic TIFF frame.
+constexpr std::time_t kFrameTimestampUtc = 1577836800;
 
 double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
 
@@ -229,6 +233,9 @@ json RigTruth(const SceneTruth& scene, const Rig& rig, const CaptureOptions& opt
       {"seed", rig.seed},
       {"frame_format", FrameFormatName(options.format)},
       {"sample_rect_mm", {-half_w, -half_h, half_w, half_h}},
+      // The scene's own grid frame (truth "grid": x = col p, y = -row p) sits shifted in the
+      // capture's world so that the sample is centred on the origin: world = scene + this.
+      {"world_from_scene_translation_mm", {-half_w + 0.5 * scene.pitch_mm, half_h - 0.5 * scene.pitch_mm, 0.0}},
       {"sample_pitch_mm", scene.pitch_mm},
       {"cameras", cams},
       {"lights", lights},
@@ -257,16 +264,6 @@ json RigTruth(const SceneTruth& scene, const Rig& rig, const CaptureOptions& opt
   };
 }
 
-void WriteJsonAtomically(const json& j, const fs::path& path) {
-  const fs::path temp = path.string() + ".partial";
-  {
-    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    out << j.dump(2) << "\n";
-    if (!out) throw InputError(path.string(), "", "a writable location");
-  }
-  fs::rename(temp, path);
-}
-
 void WriteFrame(const RawFrame& raw, const SensorSpec& sensor, FrameFormat format, const fs::path& path) {
   fs::create_directories(path.parent_path());
   if (format == FrameFormat::kDng) {
@@ -280,6 +277,7 @@ void WriteFrame(const RawFrame& raw, const SensorSpec& sensor, FrameFormat forma
   ImageWriteOptions w;
   w.encoding = PixelEncoding::kLinear;
   w.format = format == FrameFormat::kTiff ? SampleFormat::kUInt16 : SampleFormat::kFloat32;
+  w.modified_utc = kFrameTimestampUtc;  // a fixed TIFF DateTime: the same seed writes the same bytes
   WriteImageFile(RawToLinear(raw, sensor), path, w);
 }
 
@@ -310,17 +308,13 @@ void WriteEverything(const SceneTruth& scene, const Rig& rig, const CaptureOptio
   }
   WriteManifest(BuildManifest(scene, rig, options, targets, jobs), capture_dir);
 
+  const json extra = {{"rig", RigTruth(scene, rig, options, targets)}};
   const fs::path truth_dir = root / kTruthSubdir;
-  fs::create_directories(truth_dir);
-  if (truth_writer) truth_writer(scene, truth_dir);
-  const fs::path truth_file = truth_dir / kTruthFileName;
-  json truth = json::object();
-  if (fs::exists(truth_file)) {
-    std::ifstream in(truth_file);
-    truth = json::parse(in);
+  if (truth_writer) {
+    truth_writer(scene, extra, truth_dir);
+  } else {
+    WriteTruth(scene, extra, truth_dir);
   }
-  truth["rig"] = RigTruth(scene, rig, options, targets);
-  WriteJsonAtomically(truth, truth_file);
 }
 
 }  // namespace

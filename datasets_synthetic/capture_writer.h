@@ -5,8 +5,9 @@
 //   DIR/capture/capture.json          the manifest (capture/manifest.h WriteManifest)
 //   DIR/capture/frames/<camera>/...   sample and ambient frames
 //   DIR/capture/calibration/<camera>/ dark, flat, board, sphere, chart, backlight frames
-//   DIR/truth/truth.json              rig geometry, sensor, targets, units (+ the scene's own truth)
-//   DIR/truth/...                     the scene's maps (written by the caller's truth writer)
+//   DIR/truth/truth.json              the scene's truth (truth_writer.h) + "rig": geometry, sensor,
+//                                     calibration targets, units
+//   DIR/truth/<map>.exr               the scene's maps (truth_writer.h)
 //
 // Frames are rendered, exposed and written one at a time, so a 36-megapixel capture needs memory
 // for one frame (plus the scene and one camera's ray hits), not for all of them. Atomic: all of
@@ -16,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 
@@ -34,9 +36,11 @@ const char* FrameFormatName(FrameFormat format);
 // "dng", "tiff"/"tif", "exr"; nullopt otherwise.
 std::optional<FrameFormat> FrameFormatFromName(const std::string& name);
 
-// Writes the scene's truth maps and truth.json into a folder (the scenes' WriteTruth). The capture
-// writer then adds its "rig" section to truth.json.
-using TruthWriter = std::function<void(const SceneTruth& scene, const std::filesystem::path& truth_dir)>;
+// Writes the scene's truth (maps and truth.json) into a folder, with `extra` (the capture
+// writer's "rig" section: cameras, lights, sensor, targets, units) added to truth.json. Default:
+// WriteTruth of truth_writer.h. Tests pass their own to simulate failures.
+using TruthWriter = std::function<void(const SceneTruth& scene, const nlohmann::json& extra,
+                                       const std::filesystem::path& truth_dir)>;
 
 struct CaptureOptions {
   FrameFormat format = FrameFormat::kDng;

@@ -236,6 +236,8 @@ void WriteImageFile(const Image& image, const fs::path& path, const ImageWriteOp
   }
   if (ext == ".exr" || ext == ".tif" || ext == ".tiff") spec.attribute("compression", "zip");
   if (ext == ".tif" || ext == ".tiff") spec.attribute("DateTime", TiffDateTime(options.modified_utc));
+  // OIIO's EXR writer stamps the current time unless DateTime is set; empty writes no time.
+  if (ext == ".exr") spec.attribute("DateTime", "");
   // Maps hold straight (unassociated) alpha, as PNG and U3M expect; without this OIIO would divide
   // the colour by alpha on the way out.
   spec.attribute("oiio:UnassociatedAlpha", 1);

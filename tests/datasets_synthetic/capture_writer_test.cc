@@ -6,6 +6,9 @@
 #include <fstream>
 #include <iterator>
 #include <set>
+#include <unistd.h>
+#include <thread>
+#include <chrono>
 #include <nlohmann/json.hpp>
 
 #include "capture/frame_decoder.h"
@@ -27,8 +30,9 @@ constexpr std::uint64_t kSeed = 11;
 class CaptureWriterTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() / ("u3mscan_synth_writer_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-                                         "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    // The pid keeps concurrent runs (ctest -j, other checkouts) out of each other's folders.
+    root_ = fs::temp_directory_path() / ("u3mscan_synth_writer_" + std::to_string(::getpid()) + "_" +
+                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(root_);
     fs::create_directories(root_);
     RigOptions options;
@@ -177,6 +181,28 @@ TEST_F(CaptureWriterTest, TiffExrAndDngOfOneSceneAgree) {
   }
 }
 
+void ExpectSameFiles(const fs::path& a, const fs::path& b) {
+  int files = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(a)) {
+    if (!entry.is_regular_file()) continue;
+    const fs::path rel = fs::relative(entry.path(), a);
+    std::ifstream fa(entry.path(), std::ios::binary), fb(b / rel, std::ios::binary);
+    ASSERT_TRUE(fb.good()) << rel;
+    const std::string ca((std::istreambuf_iterator<char>(fa)), {}), cb((std::istreambuf_iterator<char>(fb)), {});
+    EXPECT_TRUE(ca == cb) << rel;
+    ++files;
+  }
+  EXPECT_GT(files, 10);
+}
+
+// TIFF and EXR containers stamp the time unless told otherwise; a second apart they must not.
+TEST_F(CaptureWriterTest, SameSeedGivesIdenticalTiffAndExrFiles) {
+  const fs::path a = Write("a_tif", FrameFormat::kTiff), c = Write("a_exr", FrameFormat::kExr);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  ExpectSameFiles(a, Write("b_tif", FrameFormat::kTiff));
+  ExpectSameFiles(c, Write("b_exr", FrameFormat::kExr));
+}
+
 TEST_F(CaptureWriterTest, SameSeedGivesIdenticalFiles) {
   const fs::path a = Write("a", FrameFormat::kDng, true), b = Write("b", FrameFormat::kDng, true);
   int files = 0;
@@ -203,7 +229,7 @@ TEST_F(CaptureWriterTest, FailureLeavesNoPartialOutput) {
   CaptureOptions options;
   options.calibration_frames = false;
   EXPECT_THROW(WriteSyntheticCapture(scene_, rig_, options, dir,
-                                     [](const SceneTruth&, const fs::path&) { throw std::runtime_error("disk full"); }),
+                                     [](const SceneTruth&, const nlohmann::json&, const fs::path&) { throw std::runtime_error("disk full"); }),
                std::runtime_error);
   EXPECT_FALSE(fs::exists(dir));
   EXPECT_TRUE(fs::is_empty(root_));

@@ -183,6 +183,37 @@ TEST(RendererTest, ClothMismatchChangesOnlySheenedScenes) {
   EXPECT_GT(max_rel, 0.01);
 }
 
+// Anisotropic highlights follow the scene's fibre direction; without a tangent map the fibres run
+// along +x.
+TEST(RendererTest, AnisotropyFollowsTheTangentMap) {
+  RigOptions options;
+  options.width = options.height = 32;
+  const Rig rig = MakeRig("near", options);
+  SceneTruth scene = FlatScene(32, 32, rig.ground_pitch_mm, 0.3f);
+  for (float& v : scene.anisotropic.plane(0)) v = 0.9f;
+  for (float& v : scene.roughness.plane(0)) v = 0.3f;
+  for (float& v : scene.specular.plane(0)) v = 1.0f;
+  auto render = [&](float tx, float ty) {
+    if (tx == 0 && ty == 0) {
+      scene.tangent = Image();
+    } else {
+      scene.tangent = Image(32, 32, 3, 0.0f, scene.pitch_mm);
+      for (float& v : scene.tangent.plane(0)) v = tx;
+      for (float& v : scene.tangent.plane(1)) v = ty;
+    }
+    SceneRenderer renderer(scene, rig);
+    renderer.SetCamera(0);
+    return renderer.RenderLight(8);
+  };
+  const Image none = render(0, 0), along_x = render(1, 0), along_y = render(0, 1);
+  EXPECT_EQ(none.data(), along_x.data());
+  double max_rel = 0;
+  for (std::size_t i = 0; i < none.data().size(); ++i) {
+    max_rel = std::max(max_rel, std::abs(along_y.data()[i] - none.data()[i]) / static_cast<double>(none.data()[i]));
+  }
+  EXPECT_GT(max_rel, 0.05);
+}
+
 TEST(RendererTest, BacklightPassesThroughHolesOnly) {
   RigOptions options;
   options.width = options.height = 32;

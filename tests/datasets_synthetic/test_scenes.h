@@ -23,6 +23,8 @@ inline SceneTruth FlatScene(int width, int height, double pitch_mm, float albedo
   s.metallic = Image(width, height, 1, 0.0f, pitch_mm);
   s.anisotropic = Image(width, height, 1, 0.0f, pitch_mm);
   s.alpha = Image(width, height, 1, 1.0f, pitch_mm);
+  s.tangent = Image(width, height, 3, 0.0f, pitch_mm);  // fibres along +x
+  for (float& x : s.tangent.plane(0)) x = 1.0f;
   return s;
 }
 
@@ -33,6 +35,7 @@ inline SceneTruth RidgeScene(int width, int height, double pitch_mm, int col0, i
   for (int r = 0; r < height; ++r) {
     for (int c = col0; c < col1; ++c) s.height_mm.at(0, r, c) = ridge_height_mm;
   }
+  s.height_max_mm = ridge_height_mm;
   return s;
 }
 

@@ -1,0 +1,66 @@
+// `u3mscan synth`: the synthetic scanner. Renders a scene preset with a rig preset into a capture
+// folder (DIR/capture) plus its ground truth (DIR/truth); see docs/synthetic-scanner.md.
+#include <cstdio>
+#include <iostream>
+#include <string>
+
+#include "cli/command.h"
+#include "cli/progress_bar.h"
+#include "core/logging.h"
+#include "core/error.h"
+#include "datasets_synthetic/synth_run.h"
+
+namespace u3mscan::cli {
+namespace {
+
+// "7360x4912" -> width, height; InputError naming --size otherwise.
+void ParseSize(const std::string& text, int* width, int* height) {
+  int w = 0, h = 0;
+  char x = 0, extra = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X')) {
+    throw InputError("--size", "", "WIDTHxHEIGHT in pixels, e.g. 64x64 or 7360x4912, got '" + text + "'");
+  }
+  *width = w;
+  *height = h;
+}
+
+U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture folder with ground truth", 500,
+                         [](CLI::App& sub) {
+  struct Args {
+    synthetic::SynthOptions options;
+    std::string size = "64x64";
+    std::string format = "dng";
+    bool no_calibration = false;
+    bool no_pose = false;
+    std::string out;
+  };
+  auto args = std::make_shared<Args>();
+  sub.add_option("--scene", args->options.scene, "Scene preset (plain, twill, satin, knit, denim, velvet, lace, ...)")->required();
+  sub.add_option("--rig", args->options.rig, "Rig preset (distant, near, oblique, grazing, coplanar, single_light, noisy)")->required();
+  sub.add_option("--size", args->size, "Camera frame size WxH in pixels (64x64 .. 7360x4912 and beyond)")->capture_default_str();
+  sub.add_option("--seed", args->options.seed, "Seed of scene, rig and noise")->capture_default_str();
+  sub.add_option("--format", args->format, "Frame files: dng (Bayer RAW), tiff (16-bit RGB) or exr (float RGB)")->capture_default_str();
+  sub.add_option("--dpi", args->options.dpi, "Ground resolution of the top camera and the scene grid")->capture_default_str();
+  sub.add_flag("--no-calibration", args->no_calibration, "Write sample and ambient frames only");
+  sub.add_flag("--no-pose", args->no_pose, "Leave camera poses out of capture.json (calibration finds them from the board)");
+  sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();
+  return std::function<int()>([args] {
+    ParseSize(args->size, &args->options.width, &args->options.height);
+    const auto format = synthetic::FrameFormatFromName(args->format);
+    if (!format) throw InputError("--format", "", "dng, tiff or exr, got '" + args->format + "'");
+    args->options.capture.format = *format;
+    args->options.capture.calibration_frames = !args->no_calibration;
+    args->options.capture.write_pose = !args->no_pose;
+    ProgressBar bar(GetLogLevel() > LogLevel::kInfo);
+    args->options.capture.progress = bar.Callback();
+    const synthetic::CaptureStats stats = synthetic::RunSynth(args->options, args->out);
+    bar.Finish();
+    std::cout << stats.frames << " frames, " << stats.megapixels_rendered << " MP rendered in " << stats.render_seconds
+              << " s: " << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s with writing) -> "
+              << args->out << "\n";
+    return kExitOk;
+  });
+});
+
+}  // namespace
+}  // namespace u3mscan::cli
