@@ -530,13 +530,76 @@ const LightSpec* Manifest::FindLight(const std::string& id) const {
   return nullptr;
 }
 
-Manifest ParseManifest(const std::string& json_text, const std::string& source_name) {
-  json doc;
+namespace {
+
+// A manifest is a few kilobytes and a few levels deep; deeper nesting is hostile (recursive copies
+// of such a tree overflow the stack).
+constexpr int kMaxManifestDepth = 64;
+
+// Parses JSON refusing duplicate keys (which the JSON grammar allows but makes ambiguous: one
+// reader takes the first, another the last) and nesting deeper than kMaxManifestDepth. Errors name
+// the JSON pointer of the offending key.
+json ParseStrictJson(const std::string& text, const std::string& source_name) {
+  struct Level {
+    bool is_array = false;
+    long index = -1;          // array: index of the current element
+    std::string key;          // object: the current key
+    std::set<std::string> keys;
+  };
+  std::vector<Level> levels;
+  auto pointer = [&levels]() {
+    std::string p;
+    for (const Level& level : levels) {
+      if (level.is_array) {
+        if (level.index >= 0) p += "/" + std::to_string(level.index);
+      } else if (!level.key.empty()) {
+        p += "/" + level.key;
+      }
+    }
+    return p;
+  };
+  auto element_starts = [&levels]() {
+    if (!levels.empty() && levels.back().is_array) ++levels.back().index;
+  };
+  json::parser_callback_t callback = [&](int depth, json::parse_event_t event, json& parsed) {
+    if (depth > kMaxManifestDepth) {
+      throw InputError(source_name, pointer(), "JSON nested at most " + std::to_string(kMaxManifestDepth) + " levels deep");
+    }
+    switch (event) {
+      case json::parse_event_t::object_start:
+      case json::parse_event_t::array_start:
+        element_starts();
+        levels.push_back(Level{event == json::parse_event_t::array_start, -1, {}, {}});
+        break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        if (!levels.empty()) levels.pop_back();
+        break;
+      case json::parse_event_t::key: {
+        Level& level = levels.back();
+        level.key = parsed.get<std::string>();
+        if (!level.keys.insert(level.key).second) {
+          throw InputError(source_name, pointer(), "each key once per object; \"" + level.key + "\" appears twice");
+        }
+        break;
+      }
+      case json::parse_event_t::value:
+        element_starts();
+        break;
+    }
+    return true;
+  };
   try {
-    doc = json::parse(json_text);
+    return json::parse(text, callback);
   } catch (const json::exception& e) {  // syntax errors, and numbers beyond double (1e999)
-    throw InputError(source_name, "", std::string("valid JSON with finite numbers: ") + e.what());
+    throw InputError(source_name, pointer(), std::string("valid JSON with finite numbers: ") + e.what());
   }
+}
+
+}  // namespace
+
+Manifest ParseManifest(const std::string& json_text, const std::string& source_name) {
+  const json doc = ParseStrictJson(json_text, source_name);
   const Node root(doc, source_name, "");
   root.ExpectObject("a capture manifest");
 

@@ -19,7 +19,7 @@ struct ProcessArgs {
   std::string out;
   std::string preset = "balanced";
   ProcessOptions options;
-  std::string id, created;
+  std::string id, created, name;
   double dpi = 0.0;
   int jobs = 1;
   int threads = 0;
@@ -49,6 +49,7 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
       ->check(CLI::IsMember({"ls", "robust"}));
   sub.add_option("--integrator", args->options.integrator, "Override the preset's integration: dct | robust")
       ->check(CLI::IsMember({"dct", "robust"}));
+  sub.add_option("--name", args->name, "File name of the material (one capture only; default: the capture folder's name)");
   sub.add_option("--id", args->id, "Material id (a lowercase version-4 UUID) instead of a new random one");
   sub.add_option("--created", args->created, "Creation time (UTC, 2026-11-22T10:00:00Z) instead of now");
   sub.add_option("--jobs", args->jobs, "Captures processed at the same time (each uses --threads threads)")
@@ -79,7 +80,14 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
     if (args->threads > 0) SetThreadCount(args->threads);
 
     std::vector<std::filesystem::path> inputs(args->inputs.begin(), args->inputs.end());
-    const std::vector<CaptureJob> jobs = PlanBatch(inputs, args->out);
+    std::vector<CaptureJob> jobs = PlanBatch(inputs, args->out);
+    if (!args->name.empty()) {
+      if (jobs.size() != 1) {
+        LogError() << "--name needs exactly one capture; got " << jobs.size();
+        return kExitUsage;
+      }
+      jobs[0].name = SafeMaterialName(args->name);
+    }
     BatchOptions batch;
     batch.parallel_captures = args->jobs;
     batch.skip_existing = args->skip_existing;

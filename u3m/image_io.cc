@@ -301,16 +301,23 @@ Image ReadImageFile(const fs::path& path, PixelEncoding encoding, ImageReadInfo*
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
     throw InputError(path.string(), "", "an image with a positive size");
   }
-  // Refuse absurd headers before allocating (a 2^31 x 2^31 PNG header is a few bytes).
-  constexpr std::size_t kMaxValues = std::size_t{1} << 32;
+  // Refuse absurd headers before allocating (a 36000 x 36000 PNG header is a few bytes): 2^30
+  // samples (4 GiB as float) is far above any texture a scan writes (36 MP RGBA is 1.4e8).
+  constexpr std::size_t kMaxValues = std::size_t{1} << 30;
   const std::size_t values = static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels;
   if (values > kMaxValues) {
-    throw InputError(path.string(), "", "an image of at most 2^32 samples, header says " +
+    throw InputError(path.string(), "", "an image of at most 2^30 samples, header says " +
                                             std::to_string(spec.width) + "x" + std::to_string(spec.height) +
                                             "x" + std::to_string(spec.nchannels));
   }
   const int c = spec.nchannels;
-  Image image(spec.width, spec.height, c);
+  Image image;
+  try {
+    image = Image(spec.width, spec.height, c);
+  } catch (const std::bad_alloc&) {
+    throw InputError(path.string(), "", "an image that fits in memory, header says " + std::to_string(spec.width) +
+                                            "x" + std::to_string(spec.height) + "x" + std::to_string(c));
+  }
   const std::size_t w = static_cast<std::size_t>(spec.width);
   // Integer files are read as their codes and decoded with DecodeSample, the exact inverse of the
   // writer's quantiser; everything else is converted to float by OIIO and taken as linear.

@@ -319,7 +319,8 @@ class Reader {
     if (v.is_null()) return std::nullopt;
     Object(v, p, "a visualization object or null");
     Visualization side;
-    for (const auto& [key, value] : v.members()) {
+    for (const auto& member : v.members()) {
+      const std::string& key = member.first;  // a named reference: clang 14 cannot capture a structured binding
       const bool known = key == "shader" || key == "preview" ||
                          std::any_of(ScalarKeys().begin(), ScalarKeys().end(), [&](auto& k) { return k.name == key; }) ||
                          std::any_of(ColorKeys().begin(), ColorKeys().end(), [&](auto& k) { return k.name == key; }) ||

@@ -104,6 +104,28 @@ TEST(ManifestErrors, NotJson) {
   }
 }
 
+TEST(ManifestErrors, DuplicateKeysAreRefusedWithTheirPointer) {
+  try {
+    ParseManifest(R"({"format": "u3m-capture/1", "scanner": {"vendor": "a", "vendor": "b"}})", kSource);
+    FAIL() << "a duplicate key was accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), kSource);
+    EXPECT_EQ(e.field(), "/scanner/vendor");
+    EXPECT_NE(e.expected().find("appears twice"), std::string::npos);
+  }
+}
+
+TEST(ManifestErrors, DeepNestingIsRefusedBeforeItIsCopied) {
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  try {
+    ParseManifest(R"({"format": "u3m-capture/1", "vendor_deep": )" + deep + "}", kSource);
+    FAIL() << "100000 levels of nesting were accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), kSource);
+    EXPECT_NE(e.expected().find("nested at most"), std::string::npos);
+  }
+}
+
 TEST(ManifestErrors, NumberOverflowIsNotFinite) {
   const std::string text = ManifestToJson(MakeManifest()).dump();
   std::string bad = text;

@@ -51,21 +51,6 @@ std::string DeepArray(int depth) { return std::string(depth, '[') + std::string(
 // skipped with the reason, so the suite stays green and the skip shows in every run. Remove the
 // entry with the fix.
 // The reason, or "" when `file` has no known bug.
-std::string KnownBug(const std::string& file) {
-  static const std::vector<std::pair<std::string, std::string>> known = {
-      {"large_dimensions.png",
-       "u3m/image_io ReadImageFile allocates the whole image (36000x36000x3 floats, ~15 GB) from a 100-byte "
-       "header before reading: std::bad_alloc, 'internal error', exit 1 instead of an InputError"},
-      {"duplicate_keys.json", "capture/manifest ParseManifest accepts duplicate keys in capture.json (the last wins)"},
-      {"deep_nesting.json",
-       "capture/manifest Node::CollectExtra copies a vendor key with nlohmann::json's recursive copy constructor: "
-       "a capture.json nested ~130000 deep (260 KB) overflows the stack, SIGSEGV"},
-  };
-  for (const auto& [name, reason] : known)
-    if (name == file) return reason;
-  return "";
-}
-
 // ------------------------------------------------------------------------------- U3M files
 
 const std::vector<Case>& BadU3mCases() {
@@ -178,7 +163,6 @@ TEST_P(HostileTexture, ValidateAndConvertNameTheTexture) {
   fs::copy_file(CorpusDir() / "images" / GetParam().file, tmp.path() / "in" / "textures" / "basecolor.png");
   const fs::path out = tmp.path() / "out";
   fs::create_directories(out);
-  if (const std::string bug = KnownBug(GetParam().file); !bug.empty()) GTEST_SKIP() << "known bug: " << bug;
   const std::vector<RunResult> runs = RunU3mscanAll({{{"validate", in.string()}, tmp.path() / "t1"},
                                                     {{"convert", in.string(), (out / "converted.u3ma").string()}, tmp.path() / "t2"}});
   EXPECT_TRUE(CleanExit(runs[0], kExitInvalid, {in.string() + ": INVALID", GetParam().mention})) << "validate";
@@ -354,7 +338,6 @@ TEST_P(HostileManifest, CalibrateRefusesAndWritesNothing) {
   const fs::path capture = tmp.path() / "capture";
   WriteValidCapture(capture);
   WriteFile(tmp.path() / "outside.png", ReadFile(capture / "frames" / "sample_0.png"));  // bait for escapes
-  if (const std::string bug = KnownBug(GetParam().file); !bug.empty()) GTEST_SKIP() << "known bug: " << bug;
   if (GetParam().file == "deep_nesting.json") {
     std::string text = ReadFile(capture / "capture.json");
     text = text.substr(0, text.rfind('}')) + ", \"vendor_deep\": " + DeepArray(kManifestNestingDepth) + "}";

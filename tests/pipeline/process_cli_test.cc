@@ -44,7 +44,8 @@ std::string Quote(const fs::path& path) { return "'" + path.string() + "'"; }
 class ProcessCli : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = fs::temp_directory_path() / "u3mscan_process_cli";
+    // One folder per process: ctest runs every test of this suite in its own process, in parallel.
+    root_ = fs::temp_directory_path() / ("u3mscan_process_cli_" + std::to_string(getpid()));
     fs::remove_all(root_);
     fs::create_directories(root_ / "captures");
     synthetic::RigOptions rig_options;

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <unistd.h>
+
 #include <cstdlib>
 #include <fstream>
 
@@ -19,7 +21,7 @@ namespace fs = std::filesystem;
 class ProcessE2e : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = fs::temp_directory_path() / "u3mscan_process_e2e";
+    root_ = fs::temp_directory_path() / ("u3mscan_process_e2e_" + std::to_string(getpid()));
     fs::remove_all(root_);
     fs::create_directories(root_);
     synthetic::RigOptions rig_options;
