@@ -21,16 +21,7 @@ namespace {
 constexpr SampleFormat kColourFormat = SampleFormat::kUInt8;
 constexpr SampleFormat kDataFormat = SampleFormat::kUInt16;
 
-TextureImage TextureImageFor(const Image& map, const std::string& path) {
-  const MapGeometry geometry = GeometryOf(map);
-  TextureImage image;
-  image.path = path;
-  image.width_mm = geometry.width_mm;
-  image.height_mm = geometry.height_mm;
-  image.dpi_x = geometry.dpi_x;
-  image.dpi_y = geometry.dpi_y;
-  return image;
-}
+TextureImage TextureImageFor(const Image& map, const std::string& path) { return TextureImageOf(path, GeometryOf(map)); }
 
 double PlaneStdDev(const Image& image, int channel, double* mean_out) {
   const double mean = image.ChannelMean(channel);

@@ -75,16 +75,6 @@ ExampleMaps MakeMaps(int size, double pitch_mm) {
   return maps;
 }
 
-TextureImage ImageOf(const std::string& path, const MapGeometry& g) {
-  TextureImage image;
-  image.path = path;
-  image.width_mm = g.width_mm;
-  image.height_mm = g.height_mm;
-  image.dpi_x = g.dpi_x;
-  image.dpi_y = g.dpi_y;
-  return image;
-}
-
 JsonValue OwnSection(const ExampleOptions& options) {
   JsonValue section = JsonValue::Object();
   section.Set("software", JsonValue::String(kSoftwareName));
@@ -138,14 +128,14 @@ SaveResult WriteExampleMaterial(const fs::path& out, const ExampleOptions& optio
   // Constants are the means of the values a reader gets back from the files (quantisation included).
   const auto colour_mean = ColourMapMean(maps.basecolor, SampleFormat::kUInt8);
   front.basecolor.constant = Rgb3{colour_mean[0], colour_mean[1], colour_mean[2]};
-  front.basecolor.texture = ColorTexture{BlendMode::kMultiply, Rgb3{1.0, 1.0, 1.0}, ImageOf("textures/basecolor.png", g_color)};
+  front.basecolor.texture = ColorTexture{BlendMode::kMultiply, Rgb3{1.0, 1.0, 1.0}, TextureImageOf("textures/basecolor.png", g_color)};
   const auto normal_mean = NormalMapMean(maps.normal, SampleFormat::kUInt16);
   front.normal.constant = Vec3{normal_mean[0], normal_mean[1], normal_mean[2]};
-  front.normal.texture = NormalTexture{1.0, ImageOf("textures/normal.png", g_normal)};
+  front.normal.texture = NormalTexture{1.0, TextureImageOf("textures/normal.png", g_normal)};
   front.roughness.constant = ScalarMapMean(maps.roughness, SampleFormat::kUInt8);
-  front.roughness.texture = ScalarTexture{1.0, 0.0, ImageOf("textures/roughness.png", g_rough)};
+  front.roughness.texture = ScalarTexture{1.0, 0.0, TextureImageOf("textures/roughness.png", g_rough)};
   front.displacement.constant = ScalarMapMean(maps.displacement, SampleFormat::kUInt16);
-  front.displacement.texture = ScalarTexture{1.0, 0.0, ImageOf("textures/displacement.png", g_disp)};
+  front.displacement.texture = ScalarTexture{1.0, 0.0, TextureImageOf("textures/displacement.png", g_disp)};
   front.sheen_value.constant = 0.3;  // fabrics scatter at grazing angles
   front.sheen_tint.constant = 0.5;
 

@@ -175,4 +175,14 @@ std::array<double, 3> NormalMapMean(const Image& map, SampleFormat format) {
   return {means[0] / length, means[1] / length, means[2] / length};
 }
 
+TextureImage TextureImageOf(const std::string& relative_path, const MapGeometry& geometry) {
+  TextureImage image;
+  image.path = relative_path;
+  image.width_mm = geometry.width_mm;
+  image.height_mm = geometry.height_mm;
+  image.dpi_x = geometry.dpi_x;
+  image.dpi_y = geometry.dpi_y;
+  return image;
+}
+
 }  // namespace u3mscan

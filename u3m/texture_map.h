@@ -17,6 +17,7 @@
 
 #include "core/image.h"
 #include "u3m/image_io.h"
+#include "u3m/material.h"
 
 namespace u3mscan {
 
@@ -36,6 +37,9 @@ struct MapGeometry {
 MapGeometry GeometryFromPitch(int width_px, int height_px, double pitch_x_mm, double pitch_y_mm);
 // Square pixels of image.pitch_mm().
 MapGeometry GeometryOf(const Image& image);
+
+// The U3M `image` object of a texture file at `relative_path` with this geometry (repeat defaults).
+TextureImage TextureImageOf(const std::string& relative_path, const MapGeometry& geometry);
 
 // Writes `map` as the file the extension names: .png (kUInt8/kUInt16), .tif/.tiff (kUInt8/kUInt16)
 // or .exr (kFloat32). Normal maps need 3 channels, colour maps 3 or 4 (alpha stays linear), data

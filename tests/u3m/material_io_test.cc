@@ -34,15 +34,7 @@ Material MakeMaterial(const fs::path& dir, double roughness_constant = 0.5) {
   const MapGeometry g = WriteTextureMap(rough, MapKind::kData, dir / "textures/rough.png", SampleFormat::kUInt8);
   WriteTextureMap(colour, MapKind::kColour, dir / "textures/colour.png", SampleFormat::kUInt8);
   WriteTextureMap(normal, MapKind::kNormal, dir / "textures/normal.png", SampleFormat::kUInt16);
-  const auto image = [&](const std::string& path) {
-    TextureImage i;
-    i.path = path;
-    i.width_mm = g.width_mm;
-    i.height_mm = g.height_mm;
-    i.dpi_x = g.dpi_x;
-    i.dpi_y = g.dpi_y;
-    return i;
-  };
+  const auto image = [&](const std::string& path) { return TextureImageOf(path, g); };
   Material m;
   m.id = NewUuid4();
   m.name = "io test";
