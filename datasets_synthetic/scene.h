@@ -4,7 +4,13 @@
 // (renderer.h) lights and photographs it, the truth writer stores it as float EXR maps.
 //
 // Units: heights in mm (+z toward the camera), grid pitch in mm; colours linear RGB.
+// Grid: pixel (row, col) is the point sample of the fabric at x_mm = col * pitch_mm,
+// y_mm = -row * pitch_mm (world frame: x right, y up, z out of the fabric; rows grow with -y).
+// The pattern is a function of (x_mm, y_mm) and the seed only, so a grid at twice the dpi samples
+// the same physical fabric: pixel (2r, 2c) at pitch p/2 equals pixel (r, c) at pitch p.
+// The presets are described in docs/synthetic-scenes.md.
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -18,10 +24,28 @@ namespace u3mscan::synthetic {
 // mismatch.
 enum class ReflectanceModel { kPrincipled, kClothMismatch };
 
+// Nominal Principled parameters of one yarn (or surface) of a scene, before the per-thread and
+// per-fibre variation that the maps carry. Geometry in mm (0 where it does not apply).
+struct YarnTruth {
+  std::string name;                     // "warp", "weft", "pile", "net", ...
+  std::array<float, 3> base_color{};    // linear RGB
+  float roughness = 0.5f;
+  float specular = 0.5f;
+  float specular_tint = 0.0f;
+  float sheen = 0.0f;
+  float sheen_tint = 0.0f;
+  float metallic = 0.0f;
+  float anisotropic = 0.0f;
+  double width_mm = 0.0;      // yarn width across its axis
+  double thickness_mm = 0.0;  // crown height of the yarn cross-section
+  double spacing_mm = 0.0;    // centre-to-centre distance of neighbouring threads
+};
+
 // Ground truth of one sample, every map on the same grid (width x height, pitch_mm).
 struct SceneTruth {
   std::string name;
   double pitch_mm = 0.0;
+  std::uint64_t seed = 0;
   Image height_mm;       // 1 channel, mm
   Image normal;          // 3 channels, unit, world frame (x right, y up, z out of the fabric)
   Image base_color;      // 3 channels, linear RGB
@@ -33,7 +57,19 @@ struct SceneTruth {
   Image metallic;        // 1 channel, 0 for fabric
   Image anisotropic;     // 1 channel
   Image alpha;           // 1 channel, 0 in holes, 1 on fabric
+  // 3 channels, unit, world frame: the fibre direction of the visible yarn (the BRDF's local x,
+  // the axis of anisotropy), already orthogonal to `normal`. Bitangent = normal x tangent.
+  Image tangent;
   ReflectanceModel model = ReflectanceModel::kPrincipled;
+
+  // Bounds that every height of this preset lies in, for every seed and grid (mm).
+  double height_min_mm = 0.0;
+  double height_max_mm = 0.0;
+  // Physical repeat of the weave/knit/lace pattern along x and y (mm); 0 = not periodic.
+  double repeat_x_mm = 0.0;
+  double repeat_y_mm = 0.0;
+  std::string description;       // one line: structure and what the preset tests
+  std::vector<YarnTruth> yarns;  // nominal values per yarn, for truth.json and the fit report
 };
 
 struct SceneOptions {
@@ -41,12 +77,20 @@ struct SceneOptions {
   int height = 64;
   double pitch_mm = 25.4 / 300.0;  // 300 dpi
   std::uint64_t seed = 1;
+  // True when width, height >= 1 and 0 < pitch_mm (finite).
+  bool Check() const;
 };
 
-// Names accepted by MakeScene: plain, twill, satin, knit, denim, velvet, lace, and the extreme
-// presets (dark, bright, mirror, pure_velvet, holes, ...; see SceneNames()).
+// Names accepted by MakeScene: plain, twill, satin, knit, denim, velvet, lace, and the extreme and
+// analytic presets (dark, bright, mirror, pure_velvet, holes, flat_lambertian, sphere_cap, bumps,
+// velvet_mismatch; see SceneNames()).
 std::vector<std::string> SceneNames();
-// Deterministic from options.seed. Throws std::invalid_argument for an unknown name.
+// Deterministic from options.seed, independent of the thread count. Throws std::invalid_argument
+// for an unknown name or options that fail Check().
 SceneTruth MakeScene(const std::string& name, const SceneOptions& options);
+
+// World position (mm) of a pixel centre on the scene grid (see the grid note above).
+inline double PixelXMm(int col, double pitch_mm) { return col * pitch_mm; }
+inline double PixelYMm(int row, double pitch_mm) { return -row * pitch_mm; }
 
 }  // namespace u3mscan::synthetic
