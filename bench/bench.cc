@@ -17,13 +17,14 @@
 
 #include <nlohmann/json.hpp>
 
-#include "bench/bench_scenes.h"
 #include "bench/svg_plot.h"
 #include "bench/truth_maps.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
+#include "datasets_synthetic/scene.h"
+#include "datasets_synthetic/truth_writer.h"
 
 extern char** environ;
 
@@ -76,13 +77,18 @@ fs::path EnsureCapture(const BenchCase& c, const BenchOptions& options, int* lig
   *lights_out = static_cast<int>(rig.lights.size());
   if (fs::exists(dir / synthetic::kCaptureSubdir / "capture.json")) return dir;
   fs::remove_all(dir);
-  const int scene_px = std::max(8, static_cast<int>(std::lround(kSampleFill * c.size_px)));
-  const synthetic::SceneTruth scene = MakeBenchScene(c.scene, scene_px, scene_px, rig_options.pitch_mm, options.seed);
+  synthetic::SceneOptions scene_options;
+  scene_options.width = scene_options.height = std::max(8, static_cast<int>(std::lround(kSampleFill * c.size_px)));
+  scene_options.pitch_mm = rig_options.pitch_mm;
+  scene_options.seed = options.seed;
+  const synthetic::SceneTruth scene = synthetic::MakeScene(c.scene, scene_options);
   synthetic::CaptureOptions capture;
   capture.format = synthetic::FrameFormat::kTiff;  // the decoded values; DNG decoding is not what we time
   capture.calibration_frames = c.calibration_frames;
   fs::create_directories(dir.parent_path());
-  synthetic::WriteSyntheticCapture(scene, rig, capture, dir, WriteTruthMaps);
+  synthetic::WriteSyntheticCapture(scene, rig, capture, dir, [](const synthetic::SceneTruth& truth, const fs::path& truth_dir) {
+    synthetic::WriteTruth(truth, nullptr, truth_dir);
+  });
   return dir;
 }
 
@@ -243,6 +249,8 @@ std::string UtcDate() {
 
 }  // namespace
 
+std::vector<std::string> BenchFabricScenes() { return {"plain", "twill", "satin", "knit", "denim", "velvet", "lace"}; }
+
 std::string BenchCase::CaptureId() const {
   std::string id = scene + "_" + rig + "_" + std::to_string(size_px);
   if (lights > 0) id += "_l" + std::to_string(lights);
@@ -277,7 +285,7 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
   auto add = [&](BenchCase c) { cases.push_back(std::move(c)); };
   // The matrix: scenes x distant and near lights x every preset. --quick: every preset on plain,
   // velvet with the fast preset on the distant rig only.
-  for (const auto& scene : BenchSceneNames()) {
+  for (const auto& scene : BenchFabricScenes()) {
     if (quick && scene != "plain" && scene != "velvet") continue;
     for (const char* rig : {"distant", "near"}) {
       for (const auto& preset : presets) {

@@ -2,13 +2,13 @@
 // RunBench: error against run time over a matrix of synthetic captures (`u3mscan bench`,
 // docs/bench.md).
 //
-// For each case: render a synthetic capture with truth (bench scenes, datasets_synthetic rigs),
+// For each case: render a synthetic capture with truth (datasets_synthetic scenes and rigs),
 // run `u3mscan process --debug-maps` on it in a CHILD process (so run time and peak memory are
 // that run's alone; peak RSS from wait4 and the run's report.json), read the run's report.json
 // (each stage's seconds, the steps skipped and why) and evaluate the output against the truth
 // (bench/evaluate.h). Writes bench.csv, bench.md and SVG plots into the output folder.
 //
-// Matrix: every bench scene x {distant, near} rigs x every preset at the base size; plus, on one
+// Matrix: every fabric preset of the synthetic scanner x {distant, near} rigs x every preset at the base size; plus, on one
 // scene, the method comparisons (ls vs robust photometric stereo, dct vs robust integration,
 // cluster-only vs per-pixel fitting via the presets), the "needs less" pairs (no calibration
 // frames, no oblique camera vs oblique), sizes for the megapixel axis and light subsets for the
@@ -65,6 +65,8 @@ struct BenchOptions {
   bool Check(std::string* why) const;
 };
 
+// The fabric presets of datasets_synthetic/scene.h the matrix covers (not the extreme ones).
+std::vector<std::string> BenchFabricScenes();
 // The cases RunBench runs for these options, in order.
 std::vector<BenchCase> BenchMatrix(const BenchOptions& options);
 

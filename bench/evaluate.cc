@@ -83,7 +83,7 @@ Stats Summarise(std::vector<float> values) {
 }
 
 // Local shading frame of a normal: z = n, x = world +x projected onto the tangent plane (the
-// fitter's and renderer's convention when no fibre direction is given).
+// fitter's convention; the truth uses the scene's fibre direction when truth/tangent.exr exists).
 void LocalFrame(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
   Eigen::Vector3d x = Eigen::Vector3d::UnitX() - n.x() * n;
   if (x.squaredNorm() < 1e-12) x = Eigen::Vector3d::UnitY() - n.y() * n;
@@ -317,6 +317,14 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
         }
         Eigen::Vector3d tt, tb, et, eb;
         LocalFrame(nt, &tt, &tb);
+        if (!truth.tangent.empty()) {  // the scene's fibre direction, as the renderer shades it
+          Eigen::Vector3d fibre(Bilinear(truth.tangent, 0, s), Bilinear(truth.tangent, 1, s), Bilinear(truth.tangent, 2, s));
+          fibre -= fibre.dot(nt) * nt;
+          if (fibre.squaredNorm() > 1e-12) {
+            tt = fibre.normalized();
+            tb = nt.cross(tt);
+          }
+        }
         LocalFrame(ne, &et, &eb);
         const Eigen::Vector3d vt(view_in_world.dot(tt), view_in_world.dot(tb), view_in_world.dot(nt));
         const Eigen::Vector3d ve(view_in_world.dot(et), view_in_world.dot(eb), view_in_world.dot(ne));

@@ -55,7 +55,8 @@ struct Evaluation {
   double height_rmse_mm = 0, height_range_mm = 0, height_rmse_percent = 0;
   std::vector<ParameterError> parameters;  // fitting::FitParameter order
   // Re-render error under held-out lights: sqrt(sum (fit - truth)^2 / sum truth^2) over compared
-  // pixels, RGB and lights, both rendered with core/principled_brdf.h (no cast shadows).
+  // pixels, RGB and lights, both rendered with core/principled_brdf.h (no cast shadows), view
+  // straight above; the truth in the scene's fibre frame, the fit in the fitter's (+x projected).
   int held_out_lights = 0;
   double rerender_relative_rmse = 0;
 };

@@ -16,39 +16,7 @@ namespace {
 constexpr const char* kParameterKeys[7] = {"roughness",  "specular",    "specular_tint", "sheen",
                                            "sheen_tint", "anisotropic", "metallic"};
 
-void WriteMap(const Image& image, const fs::path& path) {
-  ImageWriteOptions options;
-  options.format = SampleFormat::kFloat32;
-  WriteImageFile(image, path, options);
-}
-
 }  // namespace
-
-void WriteTruthMaps(const synthetic::SceneTruth& scene, const fs::path& truth_dir) {
-  fs::create_directories(truth_dir);
-  json maps = json::object();
-  auto put = [&](const Image& image, const std::string& key) {
-    if (image.empty()) return;
-    WriteMap(image, truth_dir / (key + ".exr"));
-    maps[key] = key + ".exr";
-  };
-  put(scene.height_mm, "height_mm");
-  put(scene.normal, "normal");
-  put(scene.base_color, "base_color");
-  put(scene.alpha, "alpha");
-  const Image* parameters[7] = {&scene.roughness, &scene.specular,    &scene.specular_tint, &scene.sheen,
-                                &scene.sheen_tint, &scene.anisotropic, &scene.metallic};
-  for (int p = 0; p < 7; ++p) put(*parameters[p], kParameterKeys[p]);
-  const json truth = {{"scene", scene.name},
-                      {"pitch_mm", scene.pitch_mm},
-                      {"width", scene.height_mm.width()},
-                      {"height", scene.height_mm.height()},
-                      {"maps", maps},
-                      {"units", {{"height_mm", "mm"}, {"normal", "unit vector, world frame"}, {"base_color", "linear RGB"}}}};
-  std::ofstream out(truth_dir / "truth.json");
-  out << truth.dump(2) << "\n";
-  if (!out) throw InputError((truth_dir / "truth.json").string(), "", "a writable truth folder");
-}
 
 TruthMaps ReadTruthMaps(const fs::path& truth_dir) {
   const fs::path truth_file = truth_dir / "truth.json";
@@ -80,6 +48,11 @@ TruthMaps ReadTruthMaps(const fs::path& truth_dir) {
   t.normal = read("normal", true);
   t.base_color = read("base_color", true);
   t.alpha = read("alpha", false);
+  t.tangent = read("tangent", false);
+  if (!t.tangent.empty() && (t.tangent.channels() < 3 || t.tangent.width() != t.height_mm.width() ||
+                             t.tangent.height() != t.height_mm.height())) {
+    t.tangent = Image();  // unusable: fall back to the +x convention
+  }
   for (int p = 0; p < 7; ++p) t.parameters[p] = read(kParameterKeys[p], false);
   if (t.normal.channels() < 3 || t.base_color.channels() < 3) {
     throw InputError(file_of("normal").string(), "", "3-channel normal and base colour truth maps");
@@ -92,6 +65,10 @@ TruthMaps ReadTruthMaps(const fs::path& truth_dir) {
   // Pitch and placement: the capture writer's "rig" section wins (it is where the scene was rendered).
   const json* rig = truth.contains("rig") && truth["rig"].is_object() ? &truth["rig"] : nullptr;
   t.pitch_mm = truth.value("pitch_mm", 0.0);
+  if (truth.contains("grid") && truth["grid"].is_object() && truth["grid"].contains("pitch_mm") &&
+      truth["grid"]["pitch_mm"].is_number()) {
+    t.pitch_mm = truth["grid"]["pitch_mm"].get<double>();  // WriteTruth's grid
+  }
   if (rig && (*rig).contains("sample_pitch_mm") && (*rig)["sample_pitch_mm"].is_number()) {
     t.pitch_mm = (*rig)["sample_pitch_mm"].get<double>();
   }
