@@ -535,9 +535,11 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
               << Fixed(row.wall_s, 2) << " s"
               << (row.status == "ok" ? ", normal " + Fixed(row.evaluation.normal_mean_deg, 2) + " deg" : " " + row.error);
     rows.push_back(std::move(row));
+    // After every case (atomic rewrites), so a long run can be read while it goes on and an
+    // interrupted one keeps what it measured.
+    WriteBenchCsv(rows, options.out_dir / "bench.csv");
+    WriteBenchMarkdown(rows, options, options.out_dir / "bench.md");
   }
-  WriteBenchCsv(rows, options.out_dir / "bench.csv");
-  WriteBenchMarkdown(rows, options, options.out_dir / "bench.md");
   WriteBenchPlots(rows, options.out_dir);
   if (!options.keep_work) fs::remove_all(options.out_dir / "work", ec);
   LogInfo() << "bench: " << rows.size() << " runs in "
