@@ -1,7 +1,10 @@
 #!/usr/bin/python3
-"""Checks what `u3mscan bench --quick -o DIR` wrote: bench.csv with the expected columns and one
-ok row per case of the quick matrix, bench.md with its tables, and four SVG plots that parse as XML."""
+"""Checks what `u3mscan bench --quick --keep-work -o DIR` wrote: bench.csv with the expected
+columns and one ok row per case of the quick matrix, bench.md with its tables, four SVG plots that
+parse as XML; then runs `u3mscan evaluate` (second argument: the executable) on one kept run."""
 import csv
+import json
+import subprocess
 import sys
 import xml.dom.minidom
 from pathlib import Path
@@ -58,6 +61,24 @@ def main():
             fail(f"{plot} is not SVG")
         if not document.getElementsByTagName("circle"):
             fail(f"{plot} has no points")
+    # `u3mscan evaluate` on a kept run: every figure printed, the JSON written, bad input -> exit 2.
+    u3mscan = sys.argv[2]
+    run = out / "work" / "runs" / "plain_distant_48_fast"
+    truth = out / "work" / "captures" / "plain_distant_48" / "truth"
+    result = subprocess.run([u3mscan, "evaluate", str(run), str(truth), "--json", str(out / "evaluate.json")],
+                            capture_output=True, text=True)
+    if result.returncode != 0:
+        fail(f"evaluate exit {result.returncode}: {result.stderr}")
+    for text in ("normal angular error", "albedo CIEDE2000", "height RMSE", "roughness", "re-render"):
+        if text not in result.stdout:
+            fail(f"evaluate did not print {text!r}: {result.stdout}")
+    figures = json.loads((out / "evaluate.json").read_text())
+    row = next(r for r in records if r["group"] == "matrix" and r["rig"] == "distant" and r["preset"] == "fast")
+    if abs(figures["normal_error_deg"]["mean"] - float(row["normal_mean_deg"])) > 1e-3:
+        fail("evaluate and bench disagree on the normal error")
+    bad = subprocess.run([u3mscan, "evaluate", str(out / "nowhere"), str(truth)], capture_output=True, text=True)
+    if bad.returncode != 2 or "report.json" not in bad.stderr:
+        fail(f"evaluate on a missing output: exit {bad.returncode}, {bad.stderr!r}")
     print(f"ok: {len(records)} runs")
 
 
