@@ -262,16 +262,20 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
 
   // Per-pixel errors (NaN where not compared), then summaries.
   const std::size_t n = samples.size();
-  std::vector<float> angle(n, NAN), de_albedo(n, NAN), de_base(n, NAN), dh(n, NAN), th_values(n, NAN);
-  std::vector<float> param_abs[kParameterCount], param_truth[kParameterCount], param_est[kParameterCount];
-  for (int p = 0; p < kParameterCount; ++p) {
-    param_abs[p].assign(n, NAN);
-    param_truth[p].assign(n, NAN);
-    param_est[p].assign(n, NAN);
-  }
-  std::vector<double> render_num(n, 0.0), render_den(n, 0.0);
+  // Per pixel only what needs percentiles (12 bytes a pixel); everything else is summed per row,
+  // so a 36-megapixel output needs no per-pixel parameter or render buffers.
+  std::vector<float> angle(n, NAN), de_albedo(n, NAN), de_base(n, NAN);
+  struct RowSums {
+    double height_d = 0, height_d2 = 0, height_lo = INFINITY, height_hi = -INFINITY;
+    long long height_count = 0;
+    double truth[kParameterCount] = {}, estimate[kParameterCount] = {}, abs_error[kParameterCount] = {};
+    long long parameter_count = 0;
+    double render_num = 0, render_den = 0;
+  };
+  std::vector<RowSums> row_sums(static_cast<std::size_t>(h));
   ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
+      RowSums& sums = row_sums[row];
       for (int col = 0; col < w; ++col) {
         const std::size_t i = row * w + col;
         const Sample& s = samples[i];
@@ -291,8 +295,14 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
           de_base[i] = static_cast<float>(Ciede2000(truth_lab, LinearSrgbToLab({base_color.at(0, row, col), base_color.at(1, row, col), base_color.at(2, row, col)})));
         }
         if (!height.empty()) {
-          th_values[i] = Bilinear(truth.height_mm, 0, s);
-          dh[i] = height.at(0, row, col) - th_values[i];
+          const double truth_h = Bilinear(truth.height_mm, 0, s), d = height.at(0, row, col) - truth_h;
+          if (std::isfinite(d)) {
+            sums.height_d += d;
+            sums.height_d2 += d * d;
+            sums.height_lo = std::min(sums.height_lo, truth_h);
+            sums.height_hi = std::max(sums.height_hi, truth_h);
+            ++sums.height_count;
+          }
         }
         PrincipledParams<double> truth_params, fit_params;
         truth_params.base_color = Eigen::Vector3d(truth_rgb[0], truth_rgb[1], truth_rgb[2]);
@@ -311,10 +321,11 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
           const double e = estimate_maps[p].empty() ? constants[p] : estimate_maps[p].at(0, row, col);
           *truth_fields[p] = t;
           *fit_fields[p] = e;
-          param_truth[p][i] = static_cast<float>(t);
-          param_est[p][i] = static_cast<float>(e);
-          param_abs[p][i] = static_cast<float>(std::abs(e - t));
+          sums.truth[p] += t;
+          sums.estimate[p] += e;
+          sums.abs_error[p] += std::abs(e - t);
         }
+        ++sums.parameter_count;
         Eigen::Vector3d tt, tb, et, eb;
         LocalFrame(nt, &tt, &tb);
         if (!truth.tangent.empty()) {  // the scene's fibre direction, as the renderer shades it
@@ -337,8 +348,8 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
           num += (re - rt).squaredNorm();
           den += rt.squaredNorm();
         }
-        render_num[i] = num;
-        render_den[i] = den;
+        sums.render_num += num;
+        sums.render_den += den;
       }
     }
   });
@@ -361,47 +372,40 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   ev.base_color_de_p95 = b.p95;
 
   // Height: remove the mean offset (integration fixes height only up to a constant).
-  double sum_d = 0, sum_d2 = 0, lo = INFINITY, hi = -INFINITY;
-  long long count = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(dh[i]) || !std::isfinite(angle[i])) continue;
-    sum_d += dh[i];
-    sum_d2 += static_cast<double>(dh[i]) * dh[i];
-    lo = std::min(lo, static_cast<double>(th_values[i]));
-    hi = std::max(hi, static_cast<double>(th_values[i]));
-    ++count;
+  RowSums all;
+  for (const RowSums& r : row_sums) {
+    all.height_d += r.height_d;
+    all.height_d2 += r.height_d2;
+    all.height_lo = std::min(all.height_lo, r.height_lo);
+    all.height_hi = std::max(all.height_hi, r.height_hi);
+    all.height_count += r.height_count;
+    for (int p = 0; p < kParameterCount; ++p) {
+      all.truth[p] += r.truth[p];
+      all.estimate[p] += r.estimate[p];
+      all.abs_error[p] += r.abs_error[p];
+    }
+    all.parameter_count += r.parameter_count;
+    all.render_num += r.render_num;
+    all.render_den += r.render_den;
   }
-  if (count > 0) {
-    const double mean = sum_d / count;
-    ev.height_rmse_mm = std::sqrt(std::max(0.0, sum_d2 / count - mean * mean));
-    ev.height_range_mm = hi - lo;
-    ev.height_rmse_percent = hi > lo ? 100.0 * ev.height_rmse_mm / (hi - lo) : kNaN;
+  if (all.height_count > 0) {
+    const double count = static_cast<double>(all.height_count), mean = all.height_d / count;
+    ev.height_rmse_mm = std::sqrt(std::max(0.0, all.height_d2 / count - mean * mean));
+    ev.height_range_mm = all.height_hi - all.height_lo;
+    ev.height_rmse_percent = ev.height_range_mm > 0 ? 100.0 * ev.height_rmse_mm / ev.height_range_mm : kNaN;
   } else {
     ev.height_rmse_mm = ev.height_range_mm = ev.height_rmse_percent = kNaN;
   }
 
   for (int p = 0; p < kParameterCount; ++p) {
     ParameterError& e = ev.parameters[p];
-    double st = 0, se = 0, sa = 0;
-    long long m = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!std::isfinite(angle[i]) || !std::isfinite(param_abs[p][i])) continue;
-      st += param_truth[p][i];
-      se += param_est[p][i];
-      sa += param_abs[p][i];
-      ++m;
-    }
-    e.truth_mean = m ? st / m : kNaN;
-    e.estimate_mean = m ? se / m : kNaN;
-    e.mean_abs_error = e.measured && m ? sa / m : kNaN;
-    e.bias = e.measured && m ? e.estimate_mean - e.truth_mean : kNaN;
+    const double m = static_cast<double>(all.parameter_count);
+    e.truth_mean = m > 0 ? all.truth[p] / m : kNaN;
+    e.estimate_mean = m > 0 ? all.estimate[p] / m : kNaN;
+    e.mean_abs_error = e.measured && m > 0 ? all.abs_error[p] / m : kNaN;
+    e.bias = e.measured && m > 0 ? e.estimate_mean - e.truth_mean : kNaN;
   }
-
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    num += render_num[i];
-    den += render_den[i];
-  }
+  const double num = all.render_num, den = all.render_den;
   ev.rerender_relative_rmse = den > 0 ? std::sqrt(num / den) : kNaN;
   return ev;
 }
