@@ -540,8 +540,8 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
     // interrupted one keeps what it measured.
     WriteBenchCsv(rows, options.out_dir / "bench.csv");
     WriteBenchMarkdown(rows, options, options.out_dir / "bench.md");
+    WriteBenchPlots(rows, options.out_dir);
   }
-  WriteBenchPlots(rows, options.out_dir);
   if (!options.keep_work) fs::remove_all(options.out_dir / "work", ec);
   LogInfo() << "bench: " << rows.size() << " runs in "
             << Fixed(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 1) << " s, written to "

@@ -6,8 +6,8 @@
 // run `u3mscan process --debug-maps` on it in a CHILD process (so run time and peak memory are
 // that run's alone; peak RSS from wait4 and the run's report.json), read the run's report.json
 // (each stage's seconds, the steps skipped and why) and evaluate the output against the truth
-// (bench/evaluate.h). Writes bench.csv and bench.md (rewritten after every case) and the SVG plots
-// (at the end) into the output folder.
+// (bench/evaluate.h). Writes bench.csv, bench.md and the SVG plots into the output folder,
+// rewritten after every case.
 //
 // Matrix: every fabric preset of the synthetic scanner x {distant, near} rigs x every preset at the base size; plus, on one
 // scene, the method comparisons (ls vs robust photometric stereo, dct vs robust integration,
