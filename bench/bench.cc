@@ -439,8 +439,8 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
   }
 
   // Needs less: steps skipped and the time they save.
-  s << "\n## Scenes that need less: steps skipped and time saved\n\n| capture | steps skipped | calibration s | total s | "
-       "compared with | its calibration s | its total s | saved s |\n|---|---|---|---|---|---|---|---|\n";
+  s << "\n## Scenes that need less: steps skipped and time saved\n\n| capture | preset | steps skipped | calibration s | total s | "
+       "compared with | its calibration s | its total s | saved s |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.status != "ok") continue;
     // `r` needs less than `full`: no calibration frames, distant instead of near lights, or the
@@ -460,7 +460,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       full = find(oblique.CaptureId(), r.c.preset);
     }
     if (!full) continue;
-    s << "| " << r.c.CaptureId() << " | " << Join(r.skipped, "; ") << " | " << Fixed(r.stages.calibration, 2) << " | "
+    s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << Join(r.skipped, "; ") << " | " << Fixed(r.stages.calibration, 2) << " | "
       << Fixed(r.total_s, 2) << " | " << full->c.CaptureId() << " | " << Fixed(full->stages.calibration, 2) << " | "
       << Fixed(full->total_s, 2) << " | " << Fixed(full->total_s - r.total_s, 2) << " |\n";
   }
@@ -520,7 +520,14 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
   std::error_code ec;
   fs::create_directories(options.out_dir, ec);
   if (ec) throw InputError(options.out_dir.string(), "", "a folder that can be created: " + ec.message());
-  const std::vector<BenchCase> cases = BenchMatrix(options);
+  std::vector<BenchCase> cases = BenchMatrix(options);
+  if (!options.only.empty()) {
+    std::erase_if(cases, [&](const BenchCase& c) {
+      return std::none_of(options.only.begin(), options.only.end(),
+                          [&](const std::string& part) { return c.RunId().find(part) != std::string::npos; });
+    });
+    if (cases.empty()) throw InputError("--only", "", "a part of at least one case name, e.g. plain_distant_48_fast");
+  }
   std::vector<BenchRow> rows;
   const auto start = std::chrono::steady_clock::now();
   for (std::size_t k = 0; k < cases.size(); ++k) {

@@ -62,6 +62,9 @@ struct BenchOptions {
   std::filesystem::path executable;  // the u3mscan binary for the child runs (required)
   int threads = 0;                   // --threads of each child (0: all cores)
   bool keep_work = false;            // keep captures and run outputs under out_dir/work
+  // Run only the cases whose RunId() contains one of these substrings (empty: every case), e.g.
+  // "knit_distant_128_balanced" to rerun one case of the full matrix.
+  std::vector<std::string> only;
   std::uint64_t seed = 1;
   bool Check(std::string* why) const;
 };

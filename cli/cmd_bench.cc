@@ -27,6 +27,8 @@ U3MSCAN_REGISTER_COMMAND(kBenchCommand, "bench", "Error against run time on synt
   sub.add_option("--threads", options->threads, "Threads of each `u3mscan process` run (0: all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", options->seed, "Seed of the synthetic captures")->capture_default_str();
   sub.add_flag("--keep-work", options->keep_work, "Keep the captures and run outputs under OUT/work");
+  sub.add_option("--only", options->only, "Run only the cases whose name contains one of these (e.g. knit_distant_128_balanced)")
+      ->delimiter(',');
   return std::function<int()>([options] {
     try {
       options->executable = SelfExecutable("u3mscan");
