@@ -1,0 +1,89 @@
+#pragma once
+// RunBench: error against run time over a matrix of synthetic captures (`u3mscan bench`,
+// docs/bench.md).
+//
+// For each case: render a synthetic capture with truth (datasets_synthetic scenes and rigs),
+// run `u3mscan process --debug-maps` on it in a CHILD process (so run time and peak memory are
+// that run's alone; peak RSS from wait4 and the run's report.json), read the run's report.json
+// (each stage's seconds, the steps skipped and why) and evaluate the output against the truth
+// (bench/evaluate.h). Writes bench.csv, bench.md and the SVG plots into the output folder,
+// rewritten after every case.
+//
+// Matrix: every fabric preset of the synthetic scanner x {distant, near} rigs x every preset at the base size; plus, on one
+// scene, the method comparisons (ls vs robust photometric stereo, dct vs robust integration,
+// cluster-only vs per-pixel fitting via the presets), the "needs less" pairs (no calibration
+// frames, no oblique camera vs oblique), sizes for the megapixel axis and light subsets for the
+// lights axis. --quick shrinks every axis.
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "bench/evaluate.h"
+
+namespace u3mscan::bench {
+
+struct BenchCase {
+  std::string scene;
+  std::string rig;            // distant | near | oblique (datasets_synthetic/rig.h)
+  int size_px = 64;           // camera width = height
+  int lights = 0;             // 0: every light of the rig; else this many, spread over the rig's lights
+  bool calibration_frames = true;  // false: no dark/flat/board/sphere/chart/backlight frames
+  std::string preset = "balanced";
+  std::string solver;         // "" = the preset's
+  std::string integrator;     // "" = the preset's
+  std::string group;          // why the case is in the matrix: matrix | methods | needs-less | size | lights
+  std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
+  std::string RunId() const;
+};
+
+struct StageSeconds {
+  double read = 0, calibration = 0, rectify = 0, alpha = 0, photometric_stereo = 0, integration = 0, fit = 0, write = 0;
+};
+
+struct BenchRow {
+  BenchCase c;
+  int lights_used = 0;         // lights in the capture
+  double megapixels = 0;       // finished map pixels / 1e6
+  std::string status = "ok";   // ok | failed (exit code and message in `error`)
+  std::string error;
+  std::string solver_used, integrator_used;  // from report.json /options
+  double wall_s = 0;           // child process, fork to exit
+  double total_s = 0;          // report.json /total_seconds
+  double peak_rss_mib = 0;     // child's max RSS (wait4)
+  StageSeconds stages;
+  std::vector<std::string> skipped;  // names of steps that did not run
+  Evaluation evaluation;
+};
+
+struct BenchOptions {
+  bool quick = false;
+  std::filesystem::path out_dir = "bench-out";
+  std::filesystem::path executable;  // the u3mscan binary for the child runs (required)
+  int threads = 0;                   // --threads of each child (0: all cores)
+  bool keep_work = false;            // keep captures and run outputs under out_dir/work
+  // Run only the cases whose RunId() contains one of these substrings (empty: every case), e.g.
+  // "knit_distant_128_balanced" to rerun one case of the full matrix.
+  std::vector<std::string> only;
+  std::uint64_t seed = 1;
+  bool Check(std::string* why) const;
+};
+
+// The fabric presets of datasets_synthetic/scene.h the matrix covers (not the extreme ones).
+std::vector<std::string> BenchFabricScenes();
+// The cases RunBench runs for these options, in order.
+std::vector<BenchCase> BenchMatrix(const BenchOptions& options);
+
+// Runs every case; a failed case is a row with status "failed", the others still run. Writes
+// bench.csv, bench.md and the plots (error_vs_time.svg, rerender_vs_time.svg, time_vs_megapixels.svg,
+// time_vs_lights.svg). Throws InputError when out_dir or the executable cannot be used.
+std::vector<BenchRow> RunBench(const BenchOptions& options);
+
+// The files RunBench writes, from rows (exposed for tests).
+void WriteBenchCsv(const std::vector<BenchRow>& rows, const std::filesystem::path& path);
+void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& options, const std::filesystem::path& path);
+void WriteBenchPlots(const std::vector<BenchRow>& rows, const std::filesystem::path& out_dir);
+// The CSV header columns, in order.
+std::vector<std::string> BenchCsvColumns();
+
+}  // namespace u3mscan::bench

@@ -1,0 +1,455 @@
+#include "bench/evaluate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <sstream>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "bench/truth_maps.h"
+#include "core/colour.h"
+#include "core/error.h"
+#include "core/parallel.h"
+#include "core/principled_brdf.h"
+#include "u3m/image_io.h"
+
+namespace u3mscan::bench {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kRadToDeg = 180.0 / M_PI;
+constexpr int kParameterCount = 7;
+// fitting::FitParameter order; names of maps/*.exr (fitting::FitParameterName) and U3M keys.
+constexpr const char* kParameterNames[kParameterCount] = {"roughness",  "specular",    "specular_tint", "sheen",
+                                                          "sheen_tint", "anisotropic", "metallic"};
+constexpr const char* kU3mKeys[kParameterCount] = {"roughness",  "specular_value",   "specular_tint", "sheen_value",
+                                                   "sheen_tint", "anisotropy_value", "metalness"};
+constexpr double kU3mDefaults[kParameterCount] = {0.7, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0};
+// A truth pixel is fabric when its alpha is at least this (holes are 0, fabric 1).
+constexpr float kFabricAlpha = 0.5f;
+
+json ReadJsonFile(const fs::path& path, const std::string& what) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path.string(), "", what);
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw InputError(path.string(), "", "valid JSON (" + std::string(e.what()) + ")");
+  }
+}
+
+// Bilinear sampling position of an output pixel centre on the truth grid.
+struct Sample {
+  int c0 = 0, r0 = 0;
+  float fx = 0, fy = 0;
+  bool inside = false;
+};
+
+float Bilinear(const Image& image, int channel, const Sample& s) {
+  const int c1 = std::min(s.c0 + 1, image.width() - 1), r1 = std::min(s.r0 + 1, image.height() - 1);
+  const float a = image.at(channel, s.r0, s.c0), b = image.at(channel, s.r0, c1);
+  const float c = image.at(channel, r1, s.c0), d = image.at(channel, r1, c1);
+  return (1 - s.fy) * ((1 - s.fx) * a + s.fx * b) + s.fy * ((1 - s.fx) * c + s.fx * d);
+}
+
+struct Stats {
+  double mean = kNaN, median = kNaN, p95 = kNaN;
+};
+
+// Mean, median and 95th percentile (nearest rank) of the finite values.
+Stats Summarise(std::vector<float> values) {
+  values.erase(std::remove_if(values.begin(), values.end(), [](float v) { return !std::isfinite(v); }), values.end());
+  Stats s;
+  if (values.empty()) return s;
+  double sum = 0;
+  for (float v : values) sum += v;
+  s.mean = sum / static_cast<double>(values.size());
+  auto rank = [&](double q) {
+    const std::size_t k = std::min(values.size() - 1, static_cast<std::size_t>(std::ceil(q * values.size())) - (q > 0 ? 1 : 0));
+    std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
+    return static_cast<double>(values[k]);
+  };
+  s.median = rank(0.5);
+  s.p95 = rank(0.95);
+  return s;
+}
+
+// Local shading frame of a normal: z = n, x = world +x projected onto the tangent plane (the
+// fitter's convention; the truth uses the scene's fibre direction when truth/tangent.exr exists).
+void LocalFrame(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
+  Eigen::Vector3d x = Eigen::Vector3d::UnitX() - n.x() * n;
+  if (x.squaredNorm() < 1e-12) x = Eigen::Vector3d::UnitY() - n.y() * n;
+  *t = x.normalized();
+  *b = n.cross(*t);
+}
+
+// Held-out lights: directional, staggered between the usual ring azimuths, at three elevations,
+// kept when no capture light is within min_separation_deg.
+std::vector<Eigen::Vector3d> HeldOutLights(const json& truth_json, const EvaluateOptions& options) {
+  std::vector<Eigen::Vector3d> capture;
+  if (truth_json.contains("rig") && truth_json["rig"].contains("lights") && truth_json["rig"]["lights"].is_array()) {
+    for (const json& l : truth_json["rig"]["lights"]) {
+      const char* key = l.contains("direction") ? "direction" : (l.contains("position_mm") ? "position_mm" : nullptr);
+      if (!key || !l[key].is_array() || l[key].size() != 3) continue;
+      Eigen::Vector3d d(l[key][0].get<double>(), l[key][1].get<double>(), l[key][2].get<double>());
+      if (d.norm() > 0) capture.push_back(d.normalized());
+    }
+  }
+  std::vector<Eigen::Vector3d> out;
+  const double min_cos = std::cos(options.min_separation_deg / kRadToDeg);
+  for (double elevation_deg : {45.0, 20.0, 75.0}) {
+    for (int k = 0; k < 8; ++k) {
+      const double azimuth = (22.5 + 45.0 * k + (elevation_deg == 45.0 ? 0.0 : 11.25)) / kRadToDeg;
+      const double e = elevation_deg / kRadToDeg;
+      const Eigen::Vector3d d(std::cos(e) * std::cos(azimuth), std::cos(e) * std::sin(azimuth), std::sin(e));
+      bool clear = true;
+      for (const auto& c : capture) clear = clear && d.dot(c) < min_cos;
+      if (clear && static_cast<int>(out.size()) < options.max_held_out_lights) out.push_back(d);
+    }
+  }
+  return out;
+}
+
+std::string Fixed(double v, int digits) {
+  if (!std::isfinite(v)) return "n/a";
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << v;
+  return s.str();
+}
+
+json Number(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+}  // namespace
+
+bool EvaluateOptions::Check(std::string* why) const {
+  if (side != "front" && side != "back") {
+    if (why) *why = "side must be front or back";
+    return false;
+  }
+  if (max_held_out_lights < 1 || !(min_separation_deg >= 0.0 && min_separation_deg < 90.0)) {
+    if (why) *why = "held-out lights: at least one, separation in [0, 90) deg";
+    return false;
+  }
+  return true;
+}
+
+Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const EvaluateOptions& options) {
+  std::string why;
+  if (!options.Check(&why)) throw InputError("evaluate options", "", why);
+  const TruthMaps truth = ReadTruthMaps(truth_dir);
+  const json truth_json = ReadJsonFile(truth_dir / "truth.json", "a readable truth.json");
+
+  // The output grid, from the run's report.
+  const fs::path report_path = output_dir / "report.json";
+  const json report = ReadJsonFile(report_path, "the report.json of a `u3mscan process` run");
+  const json* grid = nullptr;
+  if (report.contains("calibration") && report["calibration"].contains("grid")) grid = &report["calibration"]["grid"];
+  if (!grid || !grid->contains("pitch_mm") || !grid->contains("region_mm") || !(*grid)["region_mm"].is_array() ||
+      (*grid)["region_mm"].size() != 4) {
+    throw InputError(report_path.string(), "/calibration/grid", "the metric grid (pitch_mm, region_mm [x0, y0, x1, y1])");
+  }
+  const double pitch_mm = (*grid)["pitch_mm"].get<double>();
+  const double x0_mm = (*grid)["region_mm"][0].get<double>(), y1_mm = (*grid)["region_mm"][3].get<double>();
+  if (!(pitch_mm > 0)) throw InputError(report_path.string(), "/calibration/grid/pitch_mm", "a positive pitch in mm");
+
+  const std::string prefix = options.side == "front" ? "" : options.side + "_";
+  const fs::path maps_dir = output_dir / "maps";
+  auto map_path = [&](const std::string& name) { return maps_dir / (prefix + name + ".exr"); };
+  auto read_optional = [&](const std::string& name) -> Image {
+    return fs::exists(map_path(name)) ? ReadImageFile(map_path(name), PixelEncoding::kLinear) : Image();
+  };
+  if (!fs::exists(map_path("normal"))) {
+    throw InputError(map_path("normal").string(), "", "the debug maps of the run (`u3mscan process --debug-maps`)");
+  }
+  const Image normal = ReadImageFile(map_path("normal"), PixelEncoding::kLinear);
+  const int w = normal.width(), h = normal.height();
+  auto check_size = [&](const Image& image, const std::string& name, int channels) {
+    if (image.empty()) return;
+    if (image.width() != w || image.height() != h || image.channels() < channels) {
+      throw InputError(map_path(name).string(), "", std::to_string(w) + "x" + std::to_string(h) + " with " +
+                                                        std::to_string(channels) + " channel(s), like normal.exr");
+    }
+  };
+  if (normal.channels() < 3) throw InputError(map_path("normal").string(), "", "3 channels (x, y, z)");
+  const Image albedo = read_optional("albedo");
+  const Image height = read_optional("height");
+  Image base_color = read_optional("base_color");
+  check_size(albedo, "albedo", 3);
+  check_size(height, "height", 1);
+  check_size(base_color, "base_color", 3);
+  if (base_color.empty()) base_color = albedo;  // what the writer uses when the fit gives none
+  const long long expected_w = std::llround(((*grid)["region_mm"][2].get<double>() - x0_mm) / pitch_mm);
+  if (expected_w != w) {
+    throw InputError(map_path("normal").string(), "", "a width of " + std::to_string(expected_w) + " pixels (report.json /calibration/grid)");
+  }
+
+  // Fitted parameters: the per-pixel map when the run wrote one, else the material's constant.
+  std::map<std::string, std::pair<std::string, double>> written;  // u3m key -> (source, value)
+  if (report.contains("parameters") && report["parameters"].is_array()) {
+    for (const json& p : report["parameters"]) {
+      const std::string name = p.value("name", std::string());
+      if (name.rfind(options.side + "/", 0) != 0) continue;
+      written[name.substr(options.side.size() + 1)] = {p.value("source", std::string()), p.value("value", 0.0)};
+    }
+  }
+  Image estimate_maps[kParameterCount];
+  Evaluation ev;
+  ev.side = options.side;
+  ev.width = w;
+  ev.height = h;
+  double constants[kParameterCount];
+  for (int p = 0; p < kParameterCount; ++p) {
+    ParameterError e;
+    e.name = kParameterNames[p];
+    e.u3m_key = kU3mKeys[p];
+    constants[p] = kU3mDefaults[p];
+    const auto it = written.find(e.u3m_key);
+    const bool not_measured = it != written.end() && it->second.first.rfind("not measured", 0) == 0;
+    estimate_maps[p] = read_optional(e.name);
+    check_size(estimate_maps[p], e.name, 1);
+    if (it != written.end()) constants[p] = it->second.second;
+    if (not_measured) {
+      e.source = "not measured";
+      estimate_maps[p] = Image();
+    } else if (!estimate_maps[p].empty()) {
+      e.source = "map";
+      e.measured = true;
+    } else if (it != written.end()) {
+      e.source = "constant";
+      e.measured = true;
+    } else {
+      e.source = "absent";
+    }
+    ev.parameters.push_back(e);
+  }
+
+  // Where each output pixel falls on the truth grid, and whether it is fabric there.
+  std::vector<Sample> samples(static_cast<std::size_t>(w) * h);
+  const int tw = truth.normal.width(), th = truth.normal.height();
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t row = begin; row < end; ++row) {
+      for (int col = 0; col < w; ++col) {
+        const double x = x0_mm + (col + 0.5) * pitch_mm, y = y1_mm - (static_cast<double>(row) + 0.5) * pitch_mm;
+        const double u = (x - truth.x0_mm) / truth.pitch_mm - 0.5, v = (truth.y1_mm - y) / truth.pitch_mm - 0.5;
+        Sample& s = samples[row * w + col];
+        s.inside = u >= -1e-6 && v >= -1e-6 && u <= tw - 1 + 1e-6 && v <= th - 1 + 1e-6;
+        if (!s.inside) continue;
+        s.c0 = std::clamp(static_cast<int>(std::floor(u)), 0, tw - 1);
+        s.r0 = std::clamp(static_cast<int>(std::floor(v)), 0, th - 1);
+        s.fx = static_cast<float>(std::clamp(u - s.c0, 0.0, 1.0));
+        s.fy = static_cast<float>(std::clamp(v - s.r0, 0.0, 1.0));
+        if (!truth.alpha.empty()) {
+          const int c1 = std::min(s.c0 + 1, tw - 1), r1 = std::min(s.r0 + 1, th - 1);
+          for (int rr : {s.r0, r1}) {
+            for (int cc : {s.c0, c1}) s.inside = s.inside && truth.alpha.at(0, rr, cc) >= kFabricAlpha;
+          }
+        }
+      }
+    }
+  });
+
+  const std::vector<Eigen::Vector3d> lights = HeldOutLights(truth_json, options);
+  ev.held_out_lights = static_cast<int>(lights.size());
+  const Eigen::Vector3d view_in_world = Eigen::Vector3d::UnitZ();
+
+  // Per-pixel errors (NaN where not compared), then summaries.
+  const std::size_t n = samples.size();
+  // Per pixel only what needs percentiles (12 bytes a pixel); everything else is summed per row,
+  // so a 36-megapixel output needs no per-pixel parameter or render buffers.
+  std::vector<float> angle(n, NAN), de_albedo(n, NAN), de_base(n, NAN);
+  struct RowSums {
+    double height_d = 0, height_d2 = 0, height_lo = INFINITY, height_hi = -INFINITY;
+    long long height_count = 0;
+    double truth[kParameterCount] = {}, estimate[kParameterCount] = {}, abs_error[kParameterCount] = {};
+    long long parameter_count = 0;
+    double render_num = 0, render_den = 0;
+  };
+  std::vector<RowSums> row_sums(static_cast<std::size_t>(h));
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t row = begin; row < end; ++row) {
+      RowSums& sums = row_sums[row];
+      for (int col = 0; col < w; ++col) {
+        const std::size_t i = row * w + col;
+        const Sample& s = samples[i];
+        if (!s.inside) continue;
+        Eigen::Vector3d nt(Bilinear(truth.normal, 0, s), Bilinear(truth.normal, 1, s), Bilinear(truth.normal, 2, s));
+        Eigen::Vector3d ne(normal.at(0, row, col), normal.at(1, row, col), normal.at(2, row, col));
+        if (!(nt.norm() > 0) || !(ne.norm() > 0) || !ne.allFinite()) continue;
+        nt.normalize();
+        ne.normalize();
+        angle[i] = static_cast<float>(std::atan2(nt.cross(ne).norm(), nt.dot(ne)) * kRadToDeg);
+        const Rgb truth_rgb{Bilinear(truth.base_color, 0, s), Bilinear(truth.base_color, 1, s), Bilinear(truth.base_color, 2, s)};
+        const Lab truth_lab = LinearSrgbToLab(truth_rgb);
+        if (!albedo.empty()) {
+          de_albedo[i] = static_cast<float>(Ciede2000(truth_lab, LinearSrgbToLab({albedo.at(0, row, col), albedo.at(1, row, col), albedo.at(2, row, col)})));
+        }
+        if (!base_color.empty()) {
+          de_base[i] = static_cast<float>(Ciede2000(truth_lab, LinearSrgbToLab({base_color.at(0, row, col), base_color.at(1, row, col), base_color.at(2, row, col)})));
+        }
+        if (!height.empty()) {
+          const double truth_h = Bilinear(truth.height_mm, 0, s), d = height.at(0, row, col) - truth_h;
+          if (std::isfinite(d)) {
+            sums.height_d += d;
+            sums.height_d2 += d * d;
+            sums.height_lo = std::min(sums.height_lo, truth_h);
+            sums.height_hi = std::max(sums.height_hi, truth_h);
+            ++sums.height_count;
+          }
+        }
+        PrincipledParams<double> truth_params, fit_params;
+        truth_params.base_color = Eigen::Vector3d(truth_rgb[0], truth_rgb[1], truth_rgb[2]);
+        if (!base_color.empty()) {
+          fit_params.base_color = Eigen::Vector3d(base_color.at(0, row, col), base_color.at(1, row, col), base_color.at(2, row, col));
+        }
+        double* truth_fields[kParameterCount] = {&truth_params.roughness,  &truth_params.specular,    &truth_params.specular_tint,
+                                                 &truth_params.sheen,      &truth_params.sheen_tint,  &truth_params.anisotropic,
+                                                 &truth_params.metallic};
+        double* fit_fields[kParameterCount] = {&fit_params.roughness,  &fit_params.specular,    &fit_params.specular_tint,
+                                               &fit_params.sheen,      &fit_params.sheen_tint,  &fit_params.anisotropic,
+                                               &fit_params.metallic};
+        for (int p = 0; p < kParameterCount; ++p) {
+          // A truth folder without the map means the scene has the U3M default there.
+          const double t = truth.parameters[p].empty() ? kU3mDefaults[p] : Bilinear(truth.parameters[p], 0, s);
+          const double e = estimate_maps[p].empty() ? constants[p] : estimate_maps[p].at(0, row, col);
+          *truth_fields[p] = t;
+          *fit_fields[p] = e;
+          sums.truth[p] += t;
+          sums.estimate[p] += e;
+          sums.abs_error[p] += std::abs(e - t);
+        }
+        ++sums.parameter_count;
+        Eigen::Vector3d tt, tb, et, eb;
+        LocalFrame(nt, &tt, &tb);
+        if (!truth.tangent.empty()) {  // the scene's fibre direction, as the renderer shades it
+          Eigen::Vector3d fibre(Bilinear(truth.tangent, 0, s), Bilinear(truth.tangent, 1, s), Bilinear(truth.tangent, 2, s));
+          fibre -= fibre.dot(nt) * nt;
+          if (fibre.squaredNorm() > 1e-12) {
+            tt = fibre.normalized();
+            tb = nt.cross(tt);
+          }
+        }
+        LocalFrame(ne, &et, &eb);
+        const Eigen::Vector3d vt(view_in_world.dot(tt), view_in_world.dot(tb), view_in_world.dot(nt));
+        const Eigen::Vector3d ve(view_in_world.dot(et), view_in_world.dot(eb), view_in_world.dot(ne));
+        double num = 0, den = 0;
+        for (const Eigen::Vector3d& l : lights) {
+          const Eigen::Vector3d lt(l.dot(tt), l.dot(tb), l.dot(nt)), le(l.dot(et), l.dot(eb), l.dot(ne));
+          const Eigen::Vector3d rt = EvaluatePrincipled(truth_params, lt, vt) * std::max(0.0, lt.z());
+          const Eigen::Vector3d re = EvaluatePrincipled(fit_params, le, ve) * std::max(0.0, le.z());
+          if (!re.allFinite() || !rt.allFinite()) continue;
+          num += (re - rt).squaredNorm();
+          den += rt.squaredNorm();
+        }
+        sums.render_num += num;
+        sums.render_den += den;
+      }
+    }
+  });
+
+  for (std::size_t i = 0; i < n; ++i) ev.pixels_compared += std::isfinite(angle[i]) ? 1 : 0;
+  if (ev.pixels_compared == 0) {
+    throw InputError(truth_dir.string(), "", "a truth grid that overlaps the output's metric grid (report.json /calibration/grid)");
+  }
+  const Stats normal_stats = Summarise(angle);
+  ev.normal_mean_deg = normal_stats.mean;
+  ev.normal_median_deg = normal_stats.median;
+  ev.normal_p95_deg = normal_stats.p95;
+  const Stats a = Summarise(de_albedo);
+  ev.albedo_de_mean = a.mean;
+  ev.albedo_de_median = a.median;
+  ev.albedo_de_p95 = a.p95;
+  const Stats b = Summarise(de_base);
+  ev.base_color_de_mean = b.mean;
+  ev.base_color_de_median = b.median;
+  ev.base_color_de_p95 = b.p95;
+
+  // Height: remove the mean offset (integration fixes height only up to a constant).
+  RowSums all;
+  for (const RowSums& r : row_sums) {
+    all.height_d += r.height_d;
+    all.height_d2 += r.height_d2;
+    all.height_lo = std::min(all.height_lo, r.height_lo);
+    all.height_hi = std::max(all.height_hi, r.height_hi);
+    all.height_count += r.height_count;
+    for (int p = 0; p < kParameterCount; ++p) {
+      all.truth[p] += r.truth[p];
+      all.estimate[p] += r.estimate[p];
+      all.abs_error[p] += r.abs_error[p];
+    }
+    all.parameter_count += r.parameter_count;
+    all.render_num += r.render_num;
+    all.render_den += r.render_den;
+  }
+  if (all.height_count > 0) {
+    const double count = static_cast<double>(all.height_count), mean = all.height_d / count;
+    ev.height_rmse_mm = std::sqrt(std::max(0.0, all.height_d2 / count - mean * mean));
+    ev.height_range_mm = all.height_hi - all.height_lo;
+    ev.height_rmse_percent = ev.height_range_mm > 0 ? 100.0 * ev.height_rmse_mm / ev.height_range_mm : kNaN;
+  } else {
+    ev.height_rmse_mm = ev.height_range_mm = ev.height_rmse_percent = kNaN;
+  }
+
+  for (int p = 0; p < kParameterCount; ++p) {
+    ParameterError& e = ev.parameters[p];
+    const double m = static_cast<double>(all.parameter_count);
+    e.truth_mean = m > 0 ? all.truth[p] / m : kNaN;
+    e.estimate_mean = m > 0 ? all.estimate[p] / m : kNaN;
+    e.mean_abs_error = e.measured && m > 0 ? all.abs_error[p] / m : kNaN;
+    e.bias = e.measured && m > 0 ? e.estimate_mean - e.truth_mean : kNaN;
+  }
+  const double num = all.render_num, den = all.render_den;
+  ev.rerender_relative_rmse = den > 0 ? std::sqrt(num / den) : kNaN;
+  return ev;
+}
+
+json EvaluationToJson(const Evaluation& ev) {
+  json parameters = json::array();
+  for (const auto& p : ev.parameters) {
+    parameters.push_back({{"name", p.name}, {"u3m_key", p.u3m_key}, {"source", p.source}, {"measured", p.measured},
+                          {"truth_mean", Number(p.truth_mean)}, {"estimate_mean", Number(p.estimate_mean)},
+                          {"mean_abs_error", Number(p.mean_abs_error)}, {"bias", Number(p.bias)}});
+  }
+  return {{"side", ev.side},
+          {"grid", {{"width", ev.width}, {"height", ev.height}}},
+          {"pixels_compared", ev.pixels_compared},
+          {"normal_error_deg", {{"mean", Number(ev.normal_mean_deg)}, {"median", Number(ev.normal_median_deg)}, {"p95", Number(ev.normal_p95_deg)}}},
+          {"albedo_ciede2000", {{"mean", Number(ev.albedo_de_mean)}, {"median", Number(ev.albedo_de_median)}, {"p95", Number(ev.albedo_de_p95)}}},
+          {"base_color_ciede2000", {{"mean", Number(ev.base_color_de_mean)}, {"median", Number(ev.base_color_de_median)}, {"p95", Number(ev.base_color_de_p95)}}},
+          {"height", {{"rmse_mm", Number(ev.height_rmse_mm)}, {"range_mm", Number(ev.height_range_mm)}, {"rmse_percent_of_range", Number(ev.height_rmse_percent)}}},
+          {"parameters", parameters},
+          {"rerender", {{"held_out_lights", ev.held_out_lights}, {"relative_rmse", Number(ev.rerender_relative_rmse)}}}};
+}
+
+std::string EvaluationToText(const Evaluation& ev) {
+  std::ostringstream s;
+  s << "side " << ev.side << ": " << ev.width << "x" << ev.height << " grid, " << ev.pixels_compared << " pixels compared\n";
+  s << "normal angular error (deg)   mean " << Fixed(ev.normal_mean_deg, 3) << "  median " << Fixed(ev.normal_median_deg, 3)
+    << "  p95 " << Fixed(ev.normal_p95_deg, 3) << "\n";
+  s << "albedo CIEDE2000             mean " << Fixed(ev.albedo_de_mean, 3) << "  median " << Fixed(ev.albedo_de_median, 3)
+    << "  p95 " << Fixed(ev.albedo_de_p95, 3) << "\n";
+  s << "base colour CIEDE2000        mean " << Fixed(ev.base_color_de_mean, 3) << "  median " << Fixed(ev.base_color_de_median, 3)
+    << "  p95 " << Fixed(ev.base_color_de_p95, 3) << "\n";
+  s << "height RMSE (offset removed) " << Fixed(ev.height_rmse_mm * 1000.0, 2) << " um = " << Fixed(ev.height_rmse_percent, 2)
+    << " % of the " << Fixed(ev.height_range_mm * 1000.0, 1) << " um range\n";
+  for (const auto& p : ev.parameters) {
+    s << "  " << std::left << std::setw(14) << p.name << std::right;
+    if (!p.measured) {
+      s << p.source << " (material " << Fixed(p.estimate_mean, 3) << ", truth mean " << Fixed(p.truth_mean, 3) << ")\n";
+    } else {
+      s << "|error| " << Fixed(p.mean_abs_error, 4) << "  bias " << Fixed(p.bias, 4) << "  (" << p.source << ", mean "
+        << Fixed(p.estimate_mean, 3) << ", truth " << Fixed(p.truth_mean, 3) << ")\n";
+    }
+  }
+  s << "re-render, " << ev.held_out_lights << " held-out lights: relative RMSE " << Fixed(100.0 * ev.rerender_relative_rmse, 2) << " %\n";
+  return s.str();
+}
+
+}  // namespace u3mscan::bench

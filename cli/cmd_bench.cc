@@ -1,0 +1,48 @@
+// `u3mscan bench [--quick] [-o DIR]`: error against run time over a matrix of synthetic captures
+// (bench/bench.h, docs/bench.md). Each case runs `u3mscan process` in a child process of this
+// same executable.
+#include <unistd.h>
+
+#include <filesystem>
+#include <iostream>
+
+#include "bench/bench.h"
+#include "cli/command.h"
+#include "core/error.h"
+
+namespace u3mscan::cli {
+namespace {
+
+std::filesystem::path SelfExecutable(const char* fallback) {
+  std::error_code ec;
+  const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::filesystem::path(fallback) : self;
+}
+
+U3MSCAN_REGISTER_COMMAND(kBenchCommand, "bench", "Error against run time on synthetic captures (bench.csv, bench.md, SVG plots)", 70,
+                         [](CLI::App& sub) {
+  auto options = std::make_shared<bench::BenchOptions>();
+  sub.add_flag("--quick", options->quick, "Tiny sizes and few scenes (about a minute on 2 cores; for CI)");
+  sub.add_option("-o,--out", options->out_dir, "Output folder for bench.csv, bench.md and the plots")->capture_default_str();
+  sub.add_option("--threads", options->threads, "Threads of each `u3mscan process` run (0: all cores)")->check(CLI::Range(0, 1024));
+  sub.add_option("--seed", options->seed, "Seed of the synthetic captures")->capture_default_str();
+  sub.add_flag("--keep-work", options->keep_work, "Keep the captures and run outputs under OUT/work");
+  sub.add_option("--only", options->only, "Run only the cases whose name contains one of these (e.g. knit_distant_128_balanced)")
+      ->delimiter(',');
+  return std::function<int()>([options] {
+    try {
+      options->executable = SelfExecutable("u3mscan");
+      const auto rows = bench::RunBench(*options);
+      int failed = 0;
+      for (const auto& row : rows) failed += row.status == "ok" ? 0 : 1;
+      std::cout << "bench: " << rows.size() << " runs (" << failed << " failed); " << (options->out_dir / "bench.md").string() << "\n";
+      return failed ? kExitFailed : kExitOk;
+    } catch (const InputError& e) {
+      std::cerr << "error: " << e.what() << "\n";
+      return kExitUsage;
+    }
+  });
+});
+
+}  // namespace
+}  // namespace u3mscan::cli

@@ -1,0 +1,177 @@
+// The bench's writers without running the pipeline: the SVG plots parse as XML, the CSV has the
+// documented columns on every row, the markdown has its tables, and the quick matrix covers what
+// the issue asks (every preset, distant/near/oblique, both methods, a capture that needs less).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "bench/bench.h"
+#include "bench/svg_plot.h"
+
+namespace u3mscan::bench {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("u3mscan_bench_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+// True when the system python's minidom parses the file (an independent XML parser).
+bool ParsesAsXml(const fs::path& path) {
+  const std::string command = std::string(U3MSCAN_SYSTEM_PYTHON) +
+                              " -c \"import sys, xml.dom.minidom; xml.dom.minidom.parse(sys.argv[1])\" '" + path.string() + "'";
+  return std::system(command.c_str()) == 0;
+}
+
+std::string ReadText(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::vector<BenchRow> FakeRows() {
+  std::vector<BenchRow> rows;
+  int k = 0;
+  for (const char* preset : {"fast", "balanced", "best"}) {
+    for (const char* rig : {"distant", "near"}) {
+      BenchRow r;
+      r.c = {"plain", rig, 48, 0, true, preset, "", "", "matrix"};
+      r.lights_used = 16;
+      r.megapixels = 0.0023;
+      r.solver_used = "robust";
+      r.integrator_used = "dct";
+      r.total_s = 1.0 + k;
+      r.wall_s = 1.1 + k;
+      r.peak_rss_mib = 100;
+      r.skipped = {"physics", "alpha front"};
+      r.evaluation.normal_mean_deg = 1.0 / (1 + k);
+      r.evaluation.rerender_relative_rmse = 0.02;
+      r.evaluation.parameters.resize(7);
+      r.evaluation.parameters[3].measured = false;
+      r.evaluation.parameters[3].source = "not measured";
+      ++k;
+      rows.push_back(r);
+    }
+  }
+  BenchRow failed;
+  failed.c = {"velvet", "near", 48, 0, false, "fast", "ls", "", "methods"};
+  failed.status = "failed";
+  failed.error = "exit 2: error, with \"quotes\"";
+  rows.push_back(failed);
+  return rows;
+}
+
+TEST(SvgPlot, OutputParsesAsXmlAndEscapesText) {
+  const fs::path dir = TempDir("svg");
+  PlotSpec spec{"Error <&> \"time\"", "run time (s)", "error 'deg'"};
+  spec.log_x = true;
+  std::vector<PlotSeries> series(2);
+  series[0].name = "fast & <cheap>";
+  series[0].points = {{0.5, 1.0, "a<b"}, {2.0, 0.5, "c&d"}, {-1.0, 2.0, "left out on a log axis"}, {NAN, 1.0, "nan"}};
+  series[1].name = "best";
+  series[1].connect = true;
+  series[1].points = {{3.0, 0.2, "x"}, {1.0, 0.3, "y"}};
+  const fs::path path = dir / "plot.svg";
+  WriteScatterPlotSvg(spec, series, path);
+  EXPECT_TRUE(ParsesAsXml(path));
+  const std::string text = ReadText(path);
+  EXPECT_NE(text.find("Error &lt;&amp;&gt; &quot;time&quot;"), std::string::npos);
+  EXPECT_EQ(text.find("nan"), std::string::npos);
+  EXPECT_EQ(text.find("left out"), std::string::npos);
+  EXPECT_NE(text.find("<polyline"), std::string::npos);
+  // A broken document must fail the check (so the check can fail).
+  std::ofstream(dir / "broken.svg") << "<svg><g></svg>";
+  EXPECT_FALSE(ParsesAsXml(dir / "broken.svg"));
+  fs::remove_all(dir);
+}
+
+TEST(SvgPlot, EmptyAndSinglePointPlotsAreValid) {
+  const fs::path dir = TempDir("svg_empty");
+  WriteScatterPlotSvg(PlotSpec{"empty", "x", "y"}, {}, dir / "empty.svg");
+  WriteScatterPlotSvg(PlotSpec{"one", "x", "y"}, {PlotSeries{"s", {{1.0, 1.0, "p"}}, false}}, dir / "one.svg");
+  EXPECT_TRUE(ParsesAsXml(dir / "empty.svg"));
+  EXPECT_TRUE(ParsesAsXml(dir / "one.svg"));
+  fs::remove_all(dir);
+}
+
+TEST(BenchWriters, CsvHasTheColumnsOnEveryRow) {
+  const fs::path dir = TempDir("csv");
+  const auto rows = FakeRows();
+  WriteBenchCsv(rows, dir / "bench.csv");
+  std::ifstream in(dir / "bench.csv");
+  std::string header;
+  std::getline(in, header);
+  std::string expected;
+  for (const auto& c : BenchCsvColumns()) expected += (expected.empty() ? "" : ",") + c;
+  EXPECT_EQ(header, expected);
+  int lines = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++lines;
+    // Count cells outside quotes.
+    int cells = 1;
+    bool quoted = false;
+    for (char c : line) {
+      if (c == '"') quoted = !quoted;
+      else if (c == ',' && !quoted) ++cells;
+    }
+    EXPECT_EQ(cells, static_cast<int>(BenchCsvColumns().size())) << line;
+  }
+  EXPECT_EQ(lines, static_cast<int>(rows.size()));
+  fs::remove_all(dir);
+}
+
+TEST(BenchWriters, MarkdownAndPlots) {
+  const fs::path dir = TempDir("md");
+  const auto rows = FakeRows();
+  BenchOptions options;
+  options.quick = true;
+  WriteBenchMarkdown(rows, options, dir / "bench.md");
+  const std::string md = ReadText(dir / "bench.md");
+  for (const char* heading : {"## Every run", "## Presets", "## Methods on the same capture", "## Scenes that need less"}) {
+    EXPECT_NE(md.find(heading), std::string::npos) << heading;
+  }
+  EXPECT_NE(md.find("failed: exit 2"), std::string::npos);
+  WriteBenchPlots(rows, dir);
+  for (const char* plot : {"error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"}) {
+    EXPECT_TRUE(ParsesAsXml(dir / plot)) << plot;
+  }
+  fs::remove_all(dir);
+}
+
+TEST(BenchMatrix, QuickCoversPresetsRigsMethodsAndNeedsLess) {
+  BenchOptions options;
+  options.quick = true;
+  const auto cases = BenchMatrix(options);
+  std::set<std::string> presets, rigs, solvers, integrators, ids;
+  bool without_calibration = false;
+  for (const auto& c : cases) {
+    presets.insert(c.preset);
+    rigs.insert(c.rig);
+    if (!c.solver.empty()) solvers.insert(c.solver);
+    if (!c.integrator.empty()) integrators.insert(c.integrator);
+    without_calibration = without_calibration || !c.calibration_frames;
+    EXPECT_TRUE(ids.insert(c.RunId()).second) << "duplicate run " << c.RunId();
+  }
+  EXPECT_EQ(presets, (std::set<std::string>{"fast", "balanced", "best"}));
+  EXPECT_EQ(rigs, (std::set<std::string>{"distant", "near", "oblique"}));
+  EXPECT_EQ(solvers, std::set<std::string>{"ls"});
+  EXPECT_EQ(integrators, std::set<std::string>{"robust"});
+  EXPECT_TRUE(without_calibration);
+  options.quick = false;
+  EXPECT_GT(BenchMatrix(options).size(), cases.size());
+}
+
+}  // namespace
+}  // namespace u3mscan::bench

@@ -1,0 +1,85 @@
+#!/usr/bin/python3
+"""Checks what `u3mscan bench --quick --keep-work -o DIR` wrote: bench.csv with the expected
+columns and one ok row per case of the quick matrix, bench.md with its tables, four SVG plots that
+parse as XML; then runs `u3mscan evaluate` (second argument: the executable) on one kept run."""
+import csv
+import json
+import subprocess
+import sys
+import xml.dom.minidom
+from pathlib import Path
+
+EXPECTED_COLUMNS = [
+    "group", "scene", "rig", "size_px", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
+    "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
+    "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
+    "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
+    "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
+    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "error"]
+PLOTS = ["error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"]
+
+
+def fail(message):
+    print("FAIL:", message)
+    sys.exit(1)
+
+
+def main():
+    out = Path(sys.argv[1])
+    with open(out / "bench.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    if rows[0] != EXPECTED_COLUMNS:
+        fail(f"bench.csv columns {rows[0]}")
+    records = [dict(zip(rows[0], r)) for r in rows[1:]]
+    if len(records) < 10:
+        fail(f"only {len(records)} rows")
+    for r in records:
+        if len(r) != len(EXPECTED_COLUMNS):
+            fail(f"row with {len(r)} cells")
+        if r["status"] != "ok":
+            fail(f"run failed: {r}")
+        for column in ("total_s", "peak_rss_mib", "normal_mean_deg", "height_rmse_mm", "rerender_rel_rmse"):
+            if not float(r[column]) >= 0.0:
+                fail(f"{column} = {r[column]!r}")
+        if float(r["normal_mean_deg"]) > 90.0:
+            fail(f"normal error out of range: {r['normal_mean_deg']}")
+    if {r["preset"] for r in records} != {"fast", "balanced", "best"}:
+        fail("not every preset ran")
+    if not {"distant", "near", "oblique"} <= {r["rig"] for r in records}:
+        fail("rigs missing")
+    if {r["solver"] for r in records} != {"ls", "robust"} or {r["integrator"] for r in records} != {"dct", "robust"}:
+        fail("method comparison missing")
+    if not any(r["calibration_frames"] == "no" for r in records):
+        fail("no capture without calibration frames")
+    md = (out / "bench.md").read_text()
+    for heading in ("## Every run", "## Presets", "## Methods on the same capture", "## Scenes that need less"):
+        if heading not in md:
+            fail(f"bench.md lacks {heading}")
+    for plot in PLOTS:
+        document = xml.dom.minidom.parse(str(out / plot))
+        if document.documentElement.tagName != "svg":
+            fail(f"{plot} is not SVG")
+        if not document.getElementsByTagName("circle"):
+            fail(f"{plot} has no points")
+    # `u3mscan evaluate` on a kept run: every figure printed, the JSON written, bad input -> exit 2.
+    u3mscan = sys.argv[2]
+    run = out / "work" / "runs" / "plain_distant_48_fast"
+    truth = out / "work" / "captures" / "plain_distant_48" / "truth"
+    result = subprocess.run([u3mscan, "evaluate", str(run), str(truth), "--json", str(out / "evaluate.json")],
+                            capture_output=True, text=True)
+    if result.returncode != 0:
+        fail(f"evaluate exit {result.returncode}: {result.stderr}")
+    for text in ("normal angular error", "albedo CIEDE2000", "height RMSE", "roughness", "re-render"):
+        if text not in result.stdout:
+            fail(f"evaluate did not print {text!r}: {result.stdout}")
+    figures = json.loads((out / "evaluate.json").read_text())
+    row = next(r for r in records if r["group"] == "matrix" and r["rig"] == "distant" and r["preset"] == "fast")
+    if abs(figures["normal_error_deg"]["mean"] - float(row["normal_mean_deg"])) > 1e-3:
+        fail("evaluate and bench disagree on the normal error")
+    bad = subprocess.run([u3mscan, "evaluate", str(out / "nowhere"), str(truth)], capture_output=True, text=True)
+    if bad.returncode != 2 or "report.json" not in bad.stderr:
+        fail(f"evaluate on a missing output: exit {bad.returncode}, {bad.stderr!r}")
+    print(f"ok: {len(records)} runs")
+
+
+main()

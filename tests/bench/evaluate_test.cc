@@ -1,0 +1,195 @@
+// Evaluate against a known truth: an output that IS the truth gives zero errors; known
+// perturbations (normals rotated by 2 deg, roughness shifted by 0.1) are measured as such.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "bench/evaluate.h"
+#include "bench/truth_maps.h"
+#include "core/error.h"
+#include "datasets_synthetic/truth_writer.h"
+#include "u3m/image_io.h"
+
+namespace u3mscan::bench {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kSize = 64;
+constexpr double kPitchMm = 25.4 / 300.0;
+constexpr double kZeroTolerance = 1e-3;       // deg, CIEDE2000, mm, parameter units: float round-off
+constexpr double kRotationDeg = 2.0;
+constexpr double kRotationToleranceDeg = 0.02;  // float32 maps
+constexpr double kRoughnessShift = 0.1;
+constexpr double kShiftTolerance = 1e-4;
+constexpr double kResampleToleranceDeg = 0.05;  // float32 interpolation and renormalisation
+// Re-render error of a material equal to the truth except specular written as its mean constant.
+constexpr double kConstantSpecularRerender = 0.01;
+
+void WriteMap(const Image& image, const fs::path& path) {
+  ImageWriteOptions options;
+  options.format = SampleFormat::kFloat32;
+  WriteImageFile(image, path, options);
+}
+
+class EvaluateTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = fs::temp_directory_path() / ("u3mscan_evaluate_test_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    synthetic::SceneOptions options;
+    options.width = options.height = kSize;
+    options.pitch_mm = kPitchMm;
+    options.seed = 7;
+    scene_ = synthetic::MakeScene("plain", options);
+    synthetic::WriteTruth(scene_, nullptr, root_ / "truth");
+  }
+  void TearDown() override { fs::remove_all(root_); }
+
+  // An output folder whose maps are the truth (optionally perturbed), on the same grid.
+  fs::path WriteOutput(double rotate_deg, double roughness_shift, bool sheen_measured = false) {
+    const fs::path out = root_ / "out";
+    fs::remove_all(out);
+    fs::create_directories(out / "maps");
+    const double half = 0.5 * kSize * kPitchMm;
+    // Every parameter as its truth map, except: specular as a constant (its truth mean), sheen
+    // "not measured" unless sheen_measured.
+    nlohmann::json parameters = nlohmann::json::array();
+    parameters.push_back({{"name", "front/specular_value"}, {"source", "measured (uniform: constant)"},
+                          {"value", scene_.specular.ChannelMean(0)}});
+    parameters.push_back({{"name", "front/sheen_value"},
+                          {"source", sheen_measured ? "measured" : "not measured (U3M default)"}, {"value", 0.0}});
+    const nlohmann::json report = {
+        {"status", "ok"},
+        {"calibration", {{"grid", {{"width", kSize}, {"height", kSize}, {"pitch_mm", kPitchMm}, {"region_mm", {-half, -half, half, half}}}}}},
+        {"parameters", parameters}};
+    std::ofstream(out / "report.json") << report.dump(2);
+
+    Image normal = scene_.normal;
+    for (std::size_t i = 0; i < normal.pixel_count(); ++i) {
+      const Eigen::Vector3d n(normal.plane(0)[i], normal.plane(1)[i], normal.plane(2)[i]);
+      // About an axis perpendicular to the normal, so it turns by exactly rotate_deg.
+      const Eigen::Vector3d axis = n.cross(Eigen::Vector3d(1, 2, 0)).normalized();
+      const Eigen::Vector3d r = Eigen::AngleAxisd(rotate_deg * M_PI / 180.0, axis) * n;
+      for (int c = 0; c < 3; ++c) normal.plane(c)[i] = static_cast<float>(r[c]);
+    }
+    Image roughness = scene_.roughness;
+    for (float& v : roughness.data()) v += static_cast<float>(roughness_shift);
+    WriteMap(normal, out / "maps" / "normal.exr");
+    WriteMap(scene_.base_color, out / "maps" / "albedo.exr");
+    WriteMap(scene_.base_color, out / "maps" / "base_color.exr");
+    WriteMap(scene_.height_mm, out / "maps" / "height.exr");
+    WriteMap(roughness, out / "maps" / "roughness.exr");
+    WriteMap(scene_.specular_tint, out / "maps" / "specular_tint.exr");
+    WriteMap(scene_.sheen_tint, out / "maps" / "sheen_tint.exr");
+    WriteMap(scene_.anisotropic, out / "maps" / "anisotropic.exr");
+    WriteMap(scene_.metallic, out / "maps" / "metallic.exr");
+    if (sheen_measured) WriteMap(scene_.sheen, out / "maps" / "sheen.exr");
+    return out;
+  }
+
+  fs::path root_;
+  synthetic::SceneTruth scene_;
+};
+
+TEST_F(EvaluateTest, OutputEqualToTruthHasZeroErrors) {
+  const Evaluation e = Evaluate(WriteOutput(0.0, 0.0, /*sheen_measured=*/true), root_ / "truth");
+  EXPECT_EQ(e.pixels_compared, kSize * kSize);
+  EXPECT_NEAR(e.normal_mean_deg, 0.0, kZeroTolerance);
+  EXPECT_NEAR(e.normal_p95_deg, 0.0, kZeroTolerance);
+  EXPECT_NEAR(e.albedo_de_mean, 0.0, kZeroTolerance);
+  EXPECT_NEAR(e.base_color_de_mean, 0.0, kZeroTolerance);
+  EXPECT_NEAR(e.height_rmse_mm, 0.0, kZeroTolerance * 1e-3);
+  EXPECT_GT(e.height_range_mm, 0.0);
+  for (const ParameterError& p : e.parameters) {
+    ASSERT_TRUE(p.measured) << p.name;
+    if (p.source == "map") {
+      EXPECT_NEAR(p.mean_abs_error, 0.0, kZeroTolerance) << p.name;
+    }
+    EXPECT_NEAR(p.bias, 0.0, kZeroTolerance) << p.name;
+  }
+  // The rendered truth and the "fit" share normals, colours and every parameter map but the
+  // specular constant (= its truth mean), so the re-render differs only by the specular spread.
+  EXPECT_EQ(e.parameters[1].source, "constant");
+  EXPECT_GT(e.held_out_lights, 0);
+  EXPECT_LT(e.rerender_relative_rmse, kConstantSpecularRerender);
+}
+
+TEST_F(EvaluateTest, MeasuresKnownPerturbations) {
+  const Evaluation e = Evaluate(WriteOutput(kRotationDeg, kRoughnessShift), root_ / "truth");
+  EXPECT_NEAR(e.normal_mean_deg, kRotationDeg, kRotationToleranceDeg);
+  EXPECT_NEAR(e.normal_median_deg, kRotationDeg, kRotationToleranceDeg);
+  EXPECT_NEAR(e.normal_p95_deg, kRotationDeg, kRotationToleranceDeg);
+  const ParameterError& roughness = e.parameters[0];
+  ASSERT_EQ(roughness.name, "roughness");
+  EXPECT_EQ(roughness.source, "map");
+  EXPECT_NEAR(roughness.mean_abs_error, kRoughnessShift, kShiftTolerance);
+  EXPECT_NEAR(roughness.bias, kRoughnessShift, kShiftTolerance);
+  // Specular is the constant of the report (the truth mean): no bias.
+  EXPECT_EQ(e.parameters[1].source, "constant");
+  EXPECT_NEAR(e.parameters[1].bias, 0.0, kShiftTolerance);
+  EXPECT_GT(e.rerender_relative_rmse, 0.01);  // rotated normals and rougher material render differently
+}
+
+TEST_F(EvaluateTest, NotMeasuredParametersAreNotErrors) {
+  const Evaluation e = Evaluate(WriteOutput(0.0, 0.0), root_ / "truth");
+  const ParameterError& sheen = e.parameters[3];
+  ASSERT_EQ(sheen.name, "sheen");
+  EXPECT_FALSE(sheen.measured);
+  EXPECT_EQ(sheen.source, "not measured");
+  EXPECT_TRUE(std::isnan(sheen.mean_abs_error));
+  const nlohmann::json j = EvaluationToJson(e);
+  EXPECT_TRUE(j["parameters"][3]["mean_abs_error"].is_null());
+  EXPECT_NE(EvaluationToText(e).find("not measured"), std::string::npos);
+}
+
+TEST_F(EvaluateTest, ResamplesTruthOntoAFinerOutputGrid) {
+  // Output at twice the truth's resolution over the same region, holding the truth interpolated
+  // bilinearly at the output pixel centres (truth coordinate u = col / 2 - 0.25): zero error only
+  // if Evaluate maps the two grids onto each other exactly.
+  const fs::path out = WriteOutput(0.0, 0.0);
+  const double half = 0.5 * kSize * kPitchMm, fine = kPitchMm / 2;
+  std::ofstream(out / "report.json") << nlohmann::json{
+      {"calibration", {{"grid", {{"pitch_mm", fine}, {"region_mm", {-half, -half, half, half}}}}}}}.dump();
+  Image normal(2 * kSize, 2 * kSize, 3, 0.0f, fine);
+  for (int row = 0; row < 2 * kSize; ++row) {
+    for (int col = 0; col < 2 * kSize; ++col) {
+      const double u = std::clamp(col / 2.0 - 0.25, 0.0, kSize - 1.0), v = std::clamp(row / 2.0 - 0.25, 0.0, kSize - 1.0);
+      const int c0 = std::min(static_cast<int>(u), kSize - 2), r0 = std::min(static_cast<int>(v), kSize - 2);
+      const double fx = u - c0, fy = v - r0;
+      for (int c = 0; c < 3; ++c) {
+        const Image& t = scene_.normal;
+        normal.at(c, row, col) = static_cast<float>((1 - fy) * ((1 - fx) * t.at(c, r0, c0) + fx * t.at(c, r0, c0 + 1)) +
+                                                    fy * ((1 - fx) * t.at(c, r0 + 1, c0) + fx * t.at(c, r0 + 1, c0 + 1)));
+      }
+    }
+  }
+  WriteMap(normal, out / "maps" / "normal.exr");
+  for (const char* name : {"albedo", "base_color", "height", "roughness", "specular_tint", "sheen_tint", "anisotropic", "metallic"}) {
+    fs::remove(out / "maps" / (std::string(name) + ".exr"));
+  }
+  const Evaluation e = Evaluate(out, root_ / "truth");
+  EXPECT_EQ(e.width, 2 * kSize);
+  // Pixel centres on the outer quarter-pixel rim fall outside the truth's bilinear support.
+  EXPECT_EQ(e.pixels_compared, (2 * kSize - 2) * (2 * kSize - 2));
+  EXPECT_LT(e.normal_mean_deg, kResampleToleranceDeg);
+  EXPECT_LT(e.normal_p95_deg, kResampleToleranceDeg);
+}
+
+TEST_F(EvaluateTest, MissingDebugMapsIsAnInputError) {
+  const fs::path out = WriteOutput(0.0, 0.0);
+  fs::remove(out / "maps" / "normal.exr");
+  EXPECT_THROW(Evaluate(out, root_ / "truth"), InputError);
+  EXPECT_THROW(Evaluate(root_ / "nowhere", root_ / "truth"), InputError);
+}
+
+}  // namespace
+}  // namespace u3mscan::bench
