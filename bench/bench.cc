@@ -86,9 +86,7 @@ fs::path EnsureCapture(const BenchCase& c, const BenchOptions& options, int* lig
   capture.format = synthetic::FrameFormat::kTiff;  // the decoded values; DNG decoding is not what we time
   capture.calibration_frames = c.calibration_frames;
   fs::create_directories(dir.parent_path());
-  synthetic::WriteSyntheticCapture(scene, rig, capture, dir, [](const synthetic::SceneTruth& truth, const fs::path& truth_dir) {
-    synthetic::WriteTruth(truth, nullptr, truth_dir);
-  });
+  synthetic::WriteSyntheticCapture(scene, rig, capture, dir);  // default truth writer: maps + truth.json with the rig
   return dir;
 }
 
