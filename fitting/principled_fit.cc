@@ -1009,6 +1009,30 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     report.value = mean;
     report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
     const double pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
+    if (pooled_std > options.observability.max_std) {
+      // Each cluster passed its own leave-out rule (up to kFinalStdFactor max_std at the final
+      // solution), but the map as a whole is not known to max_std: left out, never reported measured
+      // with a value the capture does not pin down (e.g. sheen 0 on a velvet seen only from above).
+      int worst = -1;
+      for (int c = 0; c < k; ++c) {
+        const ParameterEstimate& e = result.clusters[c].parameters[i];
+        if (e.measured && (worst < 0 || e.std_dev > result.clusters[worst].parameters[i].std_dev)) worst = c;
+      }
+      ObservabilityContext hint_context;
+      hint_context.max_grazing_weight = -1.0;  // per cluster only
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "not measured: not constrained by this capture (posterior std pooled over the clusters %.3g > %.3g; "
+                    "worst cluster %d: %.3g); ",
+                    pooled_std, options.observability.max_std, worst, result.clusters[worst].parameters[i].std_dev);
+      report.measured = false;
+      report.constant = false;
+      report.value = FitParameterDefault(p);
+      report.spread = 0.0;
+      report.reason = buffer + LeaveOutHint(p, hint_context);
+      result.parameter_maps[i] = Image();
+      continue;
+    }
     if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
       char buffer[160];
