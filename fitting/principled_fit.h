@@ -69,6 +69,9 @@ struct FitOptions {
   // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
   // the convergence messages (the Principled model does not explain its data).
   double mismatch_relative_rms = 0.05;
+  // A cluster whose relative RMS residual exceeds this measures nothing: every shared parameter is
+  // left out with the reason (the model does not explain the data; values would be biased).
+  double unusable_relative_rms = 0.15;
   // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
   // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
   // Gauss-Newton iteration, 2 more with specular.
