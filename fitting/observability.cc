@@ -18,10 +18,23 @@ constexpr double kNullEigenvalueFraction = 1e-12;
 // A parameter whose weight in a null direction exceeds this is unconstrained.
 constexpr double kNullComponent = 1e-6;
 
-std::string Hint(FitParameter p, const ObservabilityContext& context) {
+double InformationScale(const ObservabilityContext& context, const ObservabilityOptions& options, int free_count) {
+  const double pixels = std::max(1, context.pixel_count);
+  const int dof = context.residual_count - free_count;
+  const double chi2 = dof > 0 ? 2.0 * context.cost / dof : 1.0;
+  return std::min(1.0, options.effective_pixels / pixels) / std::max(1.0, chi2);
+}
+
+}  // namespace
+
+std::string LeaveOutHint(FitParameter p, const ObservabilityContext& context) {
   char buffer[200];
   switch (p) {
     case FitParameter::kSheen:
+      if (context.max_grazing_weight < 0.0) {
+        return "sheen acts only at grazing half-angles; it needs an oblique view with lights grazing from the "
+               "opposite side";
+      }
       std::snprintf(buffer, sizeof buffer,
                     "sheen acts only at grazing half-angles; it needs an oblique view with lights grazing from the "
                     "opposite side (largest Schlick weight (1-cos_d)^5 in this capture: %.4f)",
@@ -41,15 +54,6 @@ std::string Hint(FitParameter p, const ObservabilityContext& context) {
   }
   return "";
 }
-
-double InformationScale(const ObservabilityContext& context, const ObservabilityOptions& options, int free_count) {
-  const double pixels = std::max(1, context.pixel_count);
-  const int dof = context.residual_count - free_count;
-  const double chi2 = dof > 0 ? 2.0 * context.cost / dof : 1.0;
-  return std::min(1.0, options.effective_pixels / pixels) / std::max(1.0, chi2);
-}
-
-}  // namespace
 
 bool ObservabilityOptions::Check() const {
   return max_std > 0.0 && effective_pixels >= 1 && uniform_abs_tolerance >= 0.0 && uniform_sigma_factor >= 0.0 &&
@@ -136,7 +140,7 @@ ObservabilityDecision DecideObservability(const Matrix7& fisher, const Parameter
       std::snprintf(buffer, sizeof buffer, "not constrained by this capture (posterior std %.3g > %.3g); ",
                     std_dev[worst], options.max_std);
     }
-    out.reason[worst] = buffer + Hint(static_cast<FitParameter>(worst), context);
+    out.reason[worst] = buffer + LeaveOutHint(static_cast<FitParameter>(worst), context);
   }
   for (int i = 0; i < kFitParameterCount; ++i) {
     if (!candidates[i]) out.std_dev[i] = std::numeric_limits<double>::infinity();

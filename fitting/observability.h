@@ -58,6 +58,10 @@ struct ObservabilityContext {
   double max_grazing_weight = 0;  // largest (1 - cos_d)^5 over the cluster's observations
 };
 
+// Why a parameter could not be measured, for the reason text: what kind of capture it needs. A
+// negative context.max_grazing_weight leaves out the figure of the capture's most grazing observation.
+std::string LeaveOutHint(FitParameter parameter, const ObservabilityContext& context);
+
 // Posterior standard deviations of the `free` parameters from a Fisher matrix (7 x 7) in the
 // corrected form described above; parameters not free get inf. Uses an eigen-decomposition so that
 // exactly degenerate directions show up as inf instead of as huge numbers from rounding.

@@ -50,6 +50,11 @@ constexpr double kMaxNormalLength = 1.5;
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
+// Normal refinement (RefineNormal): central-difference step of the tilt (tangent of the angle),
+// Levenberg damping of the 2x2 normal equations, and the step below which it has converged.
+constexpr double kNormalStep = 1e-4;
+constexpr double kNormalDamping = 1e-3;
+constexpr double kNormalConvergedTilt = 1e-5;
 // Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
 constexpr double kMetallicStart = 0.7;
 // Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
@@ -122,15 +127,24 @@ void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const F
 // The usable observations of pixel `index` in its local frame; returns their number (at most
 // stack.observations.size(), the size `out` must have). Also the reflectance ratios (luminance /
 // (cos_l E)) into `ratios` when non-null.
-int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
+// The reconstruction's normal of pixel `index` (world frame, not normalised).
+Eigen::Vector3d GeometryNormal(const FitContext& context, std::size_t index) {
+  const Image& normals = context.geometry->normals;
+  const int width = context.stack->grid.width;
+  const int col = static_cast<int>(index % width);
+  const int row = static_cast<int>(index / width);
+  return {normals.at(0, row, col), normals.at(1, row, col), normals.at(2, row, col)};
+}
+
+// As GatherPixel, with the pixel's normal given (world frame, any length in the valid band).
+int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::Vector3d n, LocalObservation* out,
+                          float* ratios) {
   const Stack& stack = *context.stack;
   const SurfaceGeometry& geometry = *context.geometry;
   const FitOptions& options = *context.options;
   const int width = stack.grid.width;
   const int col = static_cast<int>(index % width);
   const int row = static_cast<int>(index / width);
-  Eigen::Vector3d n(geometry.normals.at(0, row, col), geometry.normals.at(1, row, col),
-                    geometry.normals.at(2, row, col));
   const double length = n.norm();
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return 0;
   n /= length;
@@ -166,6 +180,88 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
     ++count;
   }
   return count;
+}
+
+int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
+  return GatherPixelWithNormal(context, index, GeometryNormal(context, index), out, ratios);
+}
+
+// Refines the normal of one pixel with the full Principled model at the cluster's shared `params`
+// (base colour in closed form): damped Gauss-Newton on the two tilts of the normal in the tangent
+// plane of the reconstruction's normal. Photometric stereo solves a Lambertian model, so on a
+// glossy fabric its normals lean toward the highlights by about a degree; fitted with those
+// normals, the specular lobe is explained as a weaker, wider one (specular 0.5 -> 0.23 on the bump
+// field). Returns the refined unit normal, or the reconstruction's if no step lowers the cost.
+// `buffer` is scratch space of n_obs entries; `residuals` grows to 15 n_obs once per worker.
+Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
+                             const PixelCostSettings& settings, LocalObservation* buffer, std::vector<double>& residuals) {
+  const FitOptions& options = *context.options;
+  Eigen::Vector3d n0 = GeometryNormal(context, index);
+  const double length = n0.norm();
+  if (!(length > kMinNormalLength && length < kMaxNormalLength)) return n0;
+  n0 /= length;
+  Eigen::Vector3d t0 = Eigen::Vector3d::UnitX() - n0.x() * n0;
+  if (t0.squaredNorm() < 1e-6) t0 = Eigen::Vector3d::UnitY() - n0.y() * n0;
+  t0.normalize();
+  const Eigen::Vector3d b0 = n0.cross(t0);
+  const int count0 = GatherPixelWithNormal(context, index, n0, buffer, nullptr);
+  if (count0 < options.min_observations) return n0;
+  const std::size_t m = 3 * static_cast<std::size_t>(count0);
+  residuals.resize(5 * m);
+  double* r = residuals.data();
+  double* rp = r + m;
+  double* rm = r + 2 * m;
+  double* jac0 = r + 3 * m;
+  double* jac1 = r + 4 * m;
+  // Residuals at tilt (a, b); false when the set of usable observations changes.
+  auto eval = [&](const Eigen::Vector2d& tilt, double* out, double* cost) {
+    const Eigen::Vector3d n = (n0 + tilt(0) * t0 + tilt(1) * b0).normalized();
+    if (GatherPixelWithNormal(context, index, n, buffer, nullptr) != count0) return false;
+    *cost = PixelResiduals(params, std::span<const LocalObservation>(buffer, count0), settings, out);
+    return std::isfinite(*cost);
+  };
+  Eigen::Vector2d tilt = Eigen::Vector2d::Zero();
+  double cost = 0.0;
+  if (!eval(tilt, r, &cost)) return n0;
+  const double max_tilt = std::tan(options.normal_max_change_deg * M_PI / 180.0);
+  for (int iteration = 0; iteration < options.normal_iterations; ++iteration) {
+    // Jacobian columns in jac0, jac1 (no allocation: all in `residuals`).
+    bool ok = true;
+    for (int j = 0; j < 2 && ok; ++j) {
+      Eigen::Vector2d step = Eigen::Vector2d::Zero();
+      step(j) = kNormalStep;
+      double cp = 0.0, cm = 0.0;
+      ok = eval(tilt + step, rp, &cp) && eval(tilt - step, rm, &cm);
+      double* column = j == 0 ? jac0 : jac1;
+      for (std::size_t i = 0; ok && i < m; ++i) column[i] = (rp[i] - rm[i]) / (2 * kNormalStep);
+    }
+    if (!ok) break;
+    Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
+    for (std::size_t i = 0; i < m; ++i) {
+      const Eigen::Vector2d g(jac0[i], jac1[i]);
+      jtj += g * g.transpose();
+      jtr += g * r[i];
+    }
+    jtj.diagonal() *= 1.0 + kNormalDamping;
+    const Eigen::Vector2d delta = jtj.ldlt().solve(-jtr);
+    if (!delta.allFinite()) break;
+    bool accepted = false;
+    for (double scale = 1.0; scale >= kMinStepScale; scale *= 0.5) {
+      Eigen::Vector2d candidate = tilt + scale * delta;
+      if (candidate.norm() > max_tilt) candidate *= max_tilt / candidate.norm();
+      double candidate_cost = 0.0;
+      if (eval(candidate, rp, &candidate_cost) && candidate_cost < cost) {
+        tilt = candidate;
+        cost = candidate_cost;
+        std::copy(rp, rp + m, r);
+        accepted = true;
+        break;
+      }
+    }
+    if (!accepted || delta.norm() < kNormalConvergedTilt) break;
+  }
+  return (n0 + tilt(0) * t0 + tilt(1) * b0).normalized();
 }
 
 // Albedo of a pixel for clustering: the reconstruction's, else the per-channel median ratio.
@@ -659,8 +755,9 @@ bool FitOptions::Check() const {
   return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
-         mismatch_relative_rms > 0.0 && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
-         pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0;
+         mismatch_relative_rms > 0.0 && unusable_relative_rms >= mismatch_relative_rms && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
+         pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0 && normal_refinement_passes >= 0 && normal_iterations >= 1 &&
+         normal_max_change_deg > 0.0 && normal_max_change_deg < 90.0;
 }
 
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
@@ -736,6 +833,36 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         s.luminance_start.push_back(0.2);
       }
       result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
+      // Normal refinement: the sampled pixels' normals refitted with the full model at the
+      // cluster's parameters, then the cluster refitted on them (see RefineNormal).
+      std::vector<double> scratch;
+      for (int pass = 0; pass < options.normal_refinement_passes && s.pixels() > 0; ++pass) {
+        ParameterVector params;
+        ParameterMask free{};
+        for (int i = 0; i < kFitParameterCount; ++i) {
+          const ParameterEstimate& e = result.clusters[c].parameters[i];
+          params[i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+          free[i] = e.measured;
+        }
+        ClusterSamples refined;
+        refined.offsets.push_back(0);
+        for (std::size_t j = 0; j < take; ++j) {
+          const std::size_t index = m[j * m.size() / take];
+          if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
+          const PixelCostSettings settings =
+              Settings(options, params, free, std::max(kMinStartLuminance, Luminance(result.clusters[c].mean_base_color)));
+          const Eigen::Vector3d n = RefineNormal(context, index, params, settings, buffer.data(), scratch);
+          const int count = GatherPixelWithNormal(context, index, n, buffer.data(), nullptr);
+          if (count < options.min_observations) continue;
+          refined.observations.insert(refined.observations.end(), buffer.begin(), buffer.begin() + count);
+          refined.offsets.push_back(refined.observations.size());
+          refined.luminance_start.push_back(0.2);
+        }
+        s = std::move(refined);
+        double pass_observability_s = 0.0;
+        result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
+        observability_s[c] += pass_observability_s;
+      }
       std::lock_guard lock(progress_mutex);
       ReportProgress(progress, "fit: clusters", static_cast<double>(++done) / k);
     }
@@ -757,6 +884,25 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
                     c.id, c.rms_relative_residual, options.mismatch_relative_rms);
       result.convergence.messages.push_back(buffer);
       LogWarning() << "fitting: " << buffer;
+    }
+  }
+
+  // A cluster the model explains grossly badly (cast shadows under grazing lights, pile or weave
+  // geometry below the pixel) measures nothing: its parameters would be reported with errors far
+  // above their posterior std (grazing rig: roughness 0.06 for 0.6 at a relative RMS residual of
+  // 0.18-0.89). Left out with the reason; the cluster's pixels keep the defaults.
+  for (ClusterFit& c : result.clusters) {
+    if (!(c.rms_relative_residual > options.unusable_relative_rms)) continue;
+    char buffer[220];
+    std::snprintf(buffer, sizeof buffer,
+                  "the Principled model does not explain this cluster's data (relative RMS residual %.3g > %.3g): "
+                  "its value would be biased",
+                  c.rms_relative_residual, options.unusable_relative_rms);
+    for (ParameterEstimate& e : c.parameters) {
+      if (!e.measured) continue;
+      e.measured = false;
+      e.std_dev = std::numeric_limits<double>::infinity();
+      e.reason = buffer;
     }
   }
 
@@ -882,6 +1028,30 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     report.value = mean;
     report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
     const double pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
+    if (pooled_std > options.observability.max_std) {
+      // Each cluster passed its own leave-out rule (up to kFinalStdFactor max_std at the final
+      // solution), but the map as a whole is not known to max_std: left out, never reported measured
+      // with a value the capture does not pin down (e.g. sheen 0 on a velvet seen only from above).
+      int worst = -1;
+      for (int c = 0; c < k; ++c) {
+        const ParameterEstimate& e = result.clusters[c].parameters[i];
+        if (e.measured && (worst < 0 || e.std_dev > result.clusters[worst].parameters[i].std_dev)) worst = c;
+      }
+      ObservabilityContext hint_context;
+      hint_context.max_grazing_weight = -1.0;  // per cluster only
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "not measured: not constrained by this capture (posterior std pooled over the clusters %.3g > %.3g; "
+                    "worst cluster %d: %.3g); ",
+                    pooled_std, options.observability.max_std, worst, result.clusters[worst].parameters[i].std_dev);
+      report.measured = false;
+      report.constant = false;
+      report.value = FitParameterDefault(p);
+      report.spread = 0.0;
+      report.reason = buffer + LeaveOutHint(p, hint_context);
+      result.parameter_maps[i] = Image();
+      continue;
+    }
     if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
       char buffer[160];

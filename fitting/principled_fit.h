@@ -69,6 +69,9 @@ struct FitOptions {
   // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
   // the convergence messages (the Principled model does not explain its data).
   double mismatch_relative_rms = 0.05;
+  // A cluster whose relative RMS residual exceeds this measures nothing: every shared parameter is
+  // left out with the reason (the model does not explain the data; values would be biased).
+  double unusable_relative_rms = 0.15;
   // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
   // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
   // Gauss-Newton iteration, 2 more with specular.
@@ -80,6 +83,14 @@ struct FitOptions {
   // 1 / (1 - this), i.e. it shows a highlight of at least this share.
   double pixel_min_specular_fraction = 0.1;
   int pixel_iterations = 1;
+  // Normal refinement of the cluster samples (docs/fitting.md): photometric stereo's Lambertian
+  // normals lean toward the highlights; each pass refits every sampled pixel's normal with the full
+  // model at the cluster's parameters (damped Gauss-Newton, at most normal_iterations steps, never
+  // more than normal_max_change_deg from the reconstruction's normal), then refits the cluster.
+  // 0 passes: the reconstruction's normals as they are.
+  int normal_refinement_passes = 2;
+  int normal_iterations = 5;
+  double normal_max_change_deg = 10.0;
   // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
 
   bool Check() const;
