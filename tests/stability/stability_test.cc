@@ -59,23 +59,15 @@ constexpr double kBaseColourRelativeTolerance = 0.2;  // relative error of the m
 constexpr double kMeanNormalToleranceDeg = 5.0;   // mean normal of a bump field vs +z
 
 // Known issues (docs/stability.md), reported to the owners; see KnownIssues below.
-const char* const kSpecularBiasIssue =
-    "specular comes out low through the whole pipeline (0.19-0.29 for truth 0.5 on the bump scenes)";
-const char* const kGrazingRoughnessIssue =
-    "grazing lights: roughness fitted far below the truth and still reported measured";
-const char* const kMirrorSpecularIssue =
-    "no highlight is ever seen (half-vectors 15-30 deg off the normal, bump slopes up to 12 deg): specular "
-    "is not identifiable, yet the fit reports it measured";
-
 const char* const kSingleLightHeightIssue =
     "one usable light per pixel: the height range comes out about twice the truth at a mean confidence near 0.36";
 
 // Known issues of the scanner's extreme presets: (scene, parameter, issue).
 const std::vector<std::tuple<std::string, std::string, std::string>> kScannerPresetIssues = {
     {"mirror", "front/specular_value", "woven mirror (roughness 0.02): specular ~0.01 for truth 0.5, reported measured"},
-    {"pure_velvet", "front/sheen_value",
-     "woven pure velvet, overhead camera only: sheen reported measured (constant 0) for truth 1; it cannot be "
-     "observed without an oblique view and should be 'not measured' (the bump-field velvet is)"},
+    {"dark", "front/specular_value",
+     "woven dark fabric (albedo 0.01): specular ~0.13 for truth 0.5, reported measured (cluster residual "
+     "~0.11, below the 0.15 gross-misfit rule that heavy noise alone comes near)"},
     {"pure_velvet", "front/roughness", "woven pure velvet: roughness ~0.69 for truth 1"},
     {"holes", "front/roughness", "open gauze: roughness ~0.34 for truth ~0.8 (alpha-weighted)"},
     {"holes", "front/specular_value", "open gauze: specular ~0.12 for truth 0.5 (see the specular bias)"},
@@ -472,7 +464,7 @@ TEST_F(StabilityTest, GrazingLights) {
   const SceneTruth scene = Scene("plain");
   const Outcome run = Process(MakeCapture(scene, "grazing"));
   ExpectSaneOutput(run.out, run.material, run.report);
-  ExpectTruthBounds(run, scene, {{"front/roughness", kGrazingRoughnessIssue}});
+  ExpectTruthBounds(run, scene);
 }
 
 TEST_F(StabilityTest, NearlyCoplanarLightsAreCountedIllConditioned) {
@@ -529,7 +521,7 @@ TEST_F(StabilityTest, NearMirrorRoughness) {
   const SceneTruth scene = Scene("mirror");
   const Outcome run = Process(MakeCapture(scene, "distant"));
   ExpectSaneOutput(run.out, run.material, run.report);
-  ExpectTruthBounds(run, scene, {{"front/specular_value", kMirrorSpecularIssue}});
+  ExpectTruthBounds(run, scene);
 }
 
 TEST_F(StabilityTest, PureVelvet) {
@@ -548,7 +540,7 @@ TEST_F(StabilityTest, HolesGiveAnAlphaMapAndNoNaN) {
   const SceneTruth scene = Scene("holes");
   const Outcome run = Process(MakeCapture(scene, "distant", /*calibration_frames=*/true));
   ExpectSaneOutput(run.out, run.material, run.report);
-  ExpectTruthBounds(run, scene, {{"front/specular_value", kSpecularBiasIssue}});
+  ExpectTruthBounds(run, scene);
   EXPECT_TRUE(fs::exists(run.out / "textures" / "front_alpha.png")) << "holes must give an alpha texture";
 }
 
