@@ -7,7 +7,8 @@
 #   U3MSCAN_FUZZ_BUILD_DIR  build folder (default build-fuzz)
 #   U3MSCAN_FUZZ_TARGETS    space-separated subset of: fuzz_manifest fuzz_u3m_json fuzz_u3ma
 #   U3MSCAN_FUZZ_ARGS       extra libFuzzer flags, e.g. "-jobs=4 -workers=4" or "-max_len=65536"
-#   U3MSCAN_FUZZ_CXX        the clang++ to use (default: the newest clang++-NN installed, else clang++)
+#   U3MSCAN_FUZZ_CXX        the clang++ to use (default: clang++, Debian's clang that install-deps.sh installs
+#                           together with the matching libomp and libclang-rt)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-60}
@@ -18,13 +19,9 @@ extra_args=(${U3MSCAN_FUZZ_ARGS:-})
 source_dir=$PWD
 export CCACHE_BASEDIR="$PWD"
 
-cxx=${U3MSCAN_FUZZ_CXX:-}
-if [ -z "$cxx" ]; then
-  for v in 19 18 17 16 15 14; do
-    command -v "clang++-$v" >/dev/null && { cxx=clang++-$v; break; }
-  done
-fi
-cxx=${cxx:-clang++}
+# Debian's default clang: the one whose libomp and sanitizer runtimes install-deps.sh installs (a
+# newer clang-NN installed by hand may lack them and fail to link).
+cxx=${U3MSCAN_FUZZ_CXX:-clang++}
 cc=${cxx/clang++/clang}
 for tool in "$cc" "$cxx"; do
   command -v "$tool" >/dev/null || { echo "fuzz: $tool not found (tools/install-deps.sh installs clang)" >&2; exit 2; }
