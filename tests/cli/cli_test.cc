@@ -78,6 +78,11 @@ TEST_F(Cli, ExampleWritesAValidMaterialThatInfoAndValidateRead) {
   for (const char* file : {"out/example.u3m", "out/textures/basecolor.png", "out/textures/normal.png",
                            "out/textures/roughness.png", "out/textures/displacement.png"})
     EXPECT_TRUE(fs::exists(dir_ / file)) << file;
+  // The main job runs it again and again: an earlier example is replaced, anything else is not.
+  EXPECT_EQ(U3mscan("example -o " + Path("out") + " --size 64").exit_code, 0);
+  fs::create_directories(dir_ / "mine");
+  std::ofstream(dir_ / "mine/example.u3m") << "{}";
+  EXPECT_EQ(U3mscan("example -o " + Path("mine") + " --size 64").exit_code, 2);
   const RunResult validate = U3mscan("validate " + Path("out/example.u3m"));
   EXPECT_EQ(validate.exit_code, 0) << validate.output;
   const RunResult info = U3mscan("info " + Path("out/example.u3m"));
