@@ -119,6 +119,17 @@ TEST_F(Cli, ValidateExitCodesAreZeroOneTwo) {
   EXPECT_EQ(broken.exit_code, 2) << broken.output;
   EXPECT_NE(broken.output.find("UNREADABLE"), std::string::npos) << broken.output;
   EXPECT_EQ(U3mscan("validate " + Path("ok/nothing.u3m")).exit_code, 2);
+  // Malformed input: a clear message naming file and pointer, exit 2, nothing written.
+  std::ofstream(dir_ / "ok/traversal.u3m")
+      << std::string(text.str()).replace(text.str().find("textures/normal.png"), 19, "../../../etc/passwd");
+  for (const char* name : {"ok/broken.u3m", "ok/traversal.u3m"}) {
+    const RunResult convert = U3mscan("convert " + Path(name) + " " + Path("conv/out.u3ma"));
+    EXPECT_EQ(convert.exit_code, 2) << name << ": " << convert.output;
+    EXPECT_NE(convert.output.find(name), std::string::npos) << convert.output;
+    EXPECT_FALSE(fs::exists(dir_ / "conv")) << name;
+  }
+  EXPECT_NE(U3mscan("convert " + Path("ok/traversal.u3m") + " " + Path("conv/out.u3m")).output.find("/normal/texture/image/path"),
+            std::string::npos);
 }
 
 TEST_F(Cli, ConvertChangesVersionsAndRefusesWhatTheTargetCannotHold) {
