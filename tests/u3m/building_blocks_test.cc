@@ -45,7 +45,7 @@ TEST(JsonValue, ErrorsNameThePointer) {
   EXPECT_EQ(field_of(R"({"x/y~z": {"k": 1, "k": 2}})"), "/x~1y~0z/k");
   EXPECT_EQ(field_of(R"({"a": 1,)"), "");
   std::string deepest;  // the 129th '[' fails inside 128 open arrays, each at index 0
-  for (int i = 1; i < kMaxJsonDepth; ++i) deepest += "/0";
+  for (int i = 0; i < kMaxJsonDepth; ++i) deepest += "/0";
   EXPECT_EQ(field_of(std::string(kMaxJsonDepth + 1, '[')), deepest);
   EXPECT_EQ(field_of("[1] [2]"), "");
 }
