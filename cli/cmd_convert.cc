@@ -1,4 +1,5 @@
 // `u3mscan convert IN OUT`: any U3M/U3MA to .u3m (+ textures) or .u3ma, up- or downgrading the schema.
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
@@ -49,8 +50,9 @@ U3MSCAN_REGISTER_COMMAND(kConvertCommand, "convert", "Convert a U3M/U3MA to .u3m
     const SaveResult result = SaveMaterial(loaded.material, loaded.base_dir, *out, *options);
     for (const Issue& note : result.notes) LogInfo() << *out << ": " << note.pointer << ": " << note.message;
     const ValidationReport report = ValidateMaterialFile(*out, {true, !*keep_constants});
+    const bool package = std::filesystem::path(*out).extension() == ".u3ma";
     std::cout << "wrote " << *out << " (U3M " << SchemaVersionName(result.version) << ", " << result.files.size()
-              << " files beside the material)\n";
+              << (package ? " files in the package)\n" : " files beside the material)\n");
     if (!report.valid()) {
       std::cout << *out << ": INVALID after conversion (" << report.errors() << " errors)\n";
       for (const Issue& issue : report.issues)

@@ -17,6 +17,7 @@ constexpr int kThreadPx = 16;                 // one thread crossing per 16 px
 constexpr double kReliefMm = 0.3;             // displacement 1.0 = 0.3 mm above displacement 0.0
 constexpr double kThicknessMm = 0.45;
 constexpr double kWeightGPerM2 = 180.0;
+constexpr const char* kExampleSource = "built-in example (u3mscan example)";
 
 // Relief of a plain weave in 0..1: in each cell either the warp (running along y) or the weft
 // (along x) is on top, with a rounded thread profile across it. Periodic over 2 cells.
@@ -79,7 +80,7 @@ JsonValue OwnSection(const ExampleOptions& options) {
   JsonValue section = JsonValue::Object();
   section.Set("software", JsonValue::String(kSoftwareName));
   section.Set("software_version", JsonValue::String(kSoftwareVersion));
-  section.Set("source", JsonValue::String("built-in example (u3mscan example)"));
+  section.Set("source", JsonValue::String(kExampleSource));
   JsonValue displacement = JsonValue::Object();
   displacement.Set("unit", JsonValue::String("mm"));
   displacement.Set("mm_per_unit", JsonValue::Number(kReliefMm));
@@ -87,6 +88,21 @@ JsonValue OwnSection(const ExampleOptions& options) {
   section.Set("displacement", std::move(displacement));
   section.Set("pixel_pitch_mm", JsonValue::Number(options.pitch_mm));
   return section;
+}
+
+// An earlier run of the example may be replaced without asking (the main job runs it again and
+// again); anything else at `out` is the user's and needs `overwrite`.
+bool IsPreviousExample(const fs::path& out) {
+  std::error_code ec;
+  if (!fs::exists(out, ec)) return false;
+  try {
+    const LoadedMaterial loaded = LoadMaterial(out);
+    const JsonValue* own = loaded.material.custom.Find(kOwnVendorKey);
+    const JsonValue* source = own ? own->Find("source") : nullptr;
+    return source && source->is_string() && source->text() == kExampleSource;
+  } catch (const InputError&) {
+    return false;
+  }
 }
 
 }  // namespace
@@ -163,7 +179,7 @@ SaveResult WriteExampleMaterial(const fs::path& out, const ExampleOptions& optio
 
   SaveOptions save;
   save.version = options.version;
-  save.overwrite = options.overwrite;
+  save.overwrite = options.overwrite || IsPreviousExample(out);
   return SaveMaterial(m, staging, out, save);
 }
 

@@ -16,7 +16,7 @@ struct ExampleOptions {
   int size_px = 256;       // square maps; one weave repeat every 16 px, so keep it a multiple of 16
   double pitch_mm = 0.1;   // physical pixel size (254 dpi)
   std::optional<SchemaVersion> version;  // unset: full content, written as the lowest version that holds it (1.1)
-  bool overwrite = false;
+  bool overwrite = false;  // an earlier example at the same place is replaced anyway
   bool Check(std::string* why) const;
 };
 

@@ -126,9 +126,11 @@ class DomBuilder {
     Frame& frame = stack_.back();
     if (!frame.keys.insert(key).second) {
       frame.key = key;
+      frame.key_pending = true;
       return Fail("unique keys in an object, got \"" + key + "\" twice");
     }
     frame.key = std::move(key);
+    frame.key_pending = true;
     return true;
   }
   bool end_object() { return Close(); }
@@ -151,6 +153,7 @@ class DomBuilder {
     JsonValue value;
     std::string key;  // object: key of the member being parsed
     std::unordered_set<std::string> keys;
+    bool key_pending = false;  // object: `key` named, its value not complete yet
   };
 
   std::string Pointer() const {
@@ -158,7 +161,7 @@ class DomBuilder {
     for (const Frame& frame : stack_) {
       // Appended piecewise: GCC 12 warns falsely (-Wrestrict) on "/" + std::string temporaries.
       if (frame.value.is_object()) {
-        if (frame.keys.empty()) continue;
+        if (!frame.key_pending) continue;  // between members: the object itself is at fault
         pointer += '/';
         pointer += JsonPointerEscape(frame.key);
       } else {
@@ -185,14 +188,17 @@ class DomBuilder {
     }
     Frame& frame = stack_.back();
     if (frame.value.is_array()) frame.value.Push(std::move(value));
-    else frame.value.members().emplace_back(frame.key, std::move(value));
+    else {
+      frame.value.members().emplace_back(frame.key, std::move(value));
+      frame.key_pending = false;
+    }
     return true;
   }
 
   bool Open(JsonValue container) {
     if (static_cast<int>(stack_.size()) >= kMaxJsonDepth)
       return Fail("nesting no deeper than " + std::to_string(kMaxJsonDepth) + " levels");
-    stack_.push_back(Frame{std::move(container), {}, {}});
+    stack_.push_back(Frame{std::move(container), {}, {}, false});
     return true;
   }
 

@@ -186,6 +186,31 @@ struct PlannedFile {
   std::string dest;  // relative to the output folder
 };
 
+// Creates `dir` (and missing parents); unless Keep() is called, removes again what it created, so
+// a failed save leaves no empty folders behind.
+class CreatedFolder {
+ public:
+  explicit CreatedFolder(const fs::path& dir) {
+    std::error_code ec;
+    if (dir.empty() || fs::exists(dir, ec)) return;
+    fs::path top = dir;
+    while (top.has_parent_path() && top.parent_path() != top && !fs::exists(top.parent_path(), ec)) top = top.parent_path();
+    fs::create_directories(dir, ec);
+    if (ec) throw InputError(dir.string(), "", "expected a folder that can be created: " + ec.message());
+    created_top_ = top;
+  }
+  ~CreatedFolder() {
+    if (keep_ || created_top_.empty()) return;
+    std::error_code ignored;
+    fs::remove_all(created_top_, ignored);
+  }
+  void Keep() const { keep_ = true; }
+
+ private:
+  fs::path created_top_;
+  mutable bool keep_ = false;
+};
+
 std::string PackageU3mName(const fs::path& out) {
   std::string name = SanitizeRelativePath(out.stem().string());
   if (name.find('/') != std::string::npos) name = "material";
@@ -302,8 +327,9 @@ SaveResult SaveMaterial(const Material& material, const fs::path& base_dir, cons
     std::vector<ArchiveEntry> entries;
     entries.push_back({u3m_name, std::vector<std::uint8_t>(text.text.begin(), text.text.end())});
     for (const PlannedFile& file : planned) entries.push_back({file.dest, ReadBytes(file.source)});
-    if (!out.parent_path().empty()) fs::create_directories(out.parent_path(), ec);
+    const CreatedFolder folder(out.parent_path());
     WriteArchive(out, entries);
+    folder.Keep();
     return result;
   }
 
@@ -313,8 +339,7 @@ SaveResult SaveMaterial(const Material& material, const fs::path& base_dir, cons
     if (fs::exists(final_path, ec) && !fs::equivalent(final_path, file.source, ec) && !options.overwrite)
       throw InputError(final_path.string(), "", "expected no existing file of this name (--force replaces it)");
   }
-  fs::create_directories(out_dir, ec);
-  if (ec) throw InputError(out_dir.string(), "", "expected a folder that can be created: " + ec.message());
+  const CreatedFolder folder(out_dir);
   const fs::path temp = out_dir / (".u3mscan-" + RandomTag() + ".partial");
   try {
     fs::create_directory(temp);
@@ -343,6 +368,7 @@ SaveResult SaveMaterial(const Material& material, const fs::path& base_dir, cons
     throw;
   }
   fs::remove_all(temp, ec);
+  folder.Keep();
   return result;
 }
 

@@ -78,6 +78,11 @@ TEST_F(Cli, ExampleWritesAValidMaterialThatInfoAndValidateRead) {
   for (const char* file : {"out/example.u3m", "out/textures/basecolor.png", "out/textures/normal.png",
                            "out/textures/roughness.png", "out/textures/displacement.png"})
     EXPECT_TRUE(fs::exists(dir_ / file)) << file;
+  // The main job runs it again and again: an earlier example is replaced, anything else is not.
+  EXPECT_EQ(U3mscan("example -o " + Path("out") + " --size 64").exit_code, 0);
+  fs::create_directories(dir_ / "mine");
+  std::ofstream(dir_ / "mine/example.u3m") << "{}";
+  EXPECT_EQ(U3mscan("example -o " + Path("mine") + " --size 64").exit_code, 2);
   const RunResult validate = U3mscan("validate " + Path("out/example.u3m"));
   EXPECT_EQ(validate.exit_code, 0) << validate.output;
   const RunResult info = U3mscan("info " + Path("out/example.u3m"));
@@ -114,6 +119,17 @@ TEST_F(Cli, ValidateExitCodesAreZeroOneTwo) {
   EXPECT_EQ(broken.exit_code, 2) << broken.output;
   EXPECT_NE(broken.output.find("UNREADABLE"), std::string::npos) << broken.output;
   EXPECT_EQ(U3mscan("validate " + Path("ok/nothing.u3m")).exit_code, 2);
+  // Malformed input: a clear message naming file and pointer, exit 2, nothing written.
+  std::ofstream(dir_ / "ok/traversal.u3m")
+      << std::string(text.str()).replace(text.str().find("textures/normal.png"), 19, "../../../etc/passwd");
+  for (const char* name : {"ok/broken.u3m", "ok/traversal.u3m"}) {
+    const RunResult convert = U3mscan("convert " + Path(name) + " " + Path("conv/out.u3ma"));
+    EXPECT_EQ(convert.exit_code, 2) << name << ": " << convert.output;
+    EXPECT_NE(convert.output.find(name), std::string::npos) << convert.output;
+    EXPECT_FALSE(fs::exists(dir_ / "conv")) << name;
+  }
+  EXPECT_NE(U3mscan("convert " + Path("ok/traversal.u3m") + " " + Path("conv/out.u3m")).output.find("/normal/texture/image/path"),
+            std::string::npos);
 }
 
 TEST_F(Cli, ConvertChangesVersionsAndRefusesWhatTheTargetCannotHold) {

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <random>
 
 #include "core/error.h"
 #include "u3m/material_io.h"
@@ -241,6 +242,45 @@ TEST(MaterialJson, MalformedInputGivesAClearErrorNeverACrash) {
       }
     }
   }
+}
+
+// Random damage (fixed seed): every mutant either reads (and then writes valid text or refuses with
+// InputError) or is refused with InputError; nothing else escapes, nothing crashes.
+TEST(MaterialJson, RandomlyDamagedDocumentsNeverEscapeAsOtherErrors) {
+  constexpr int kMutants = 3000;
+  std::mt19937 rng(20261122);
+  const std::string sources[] = {Inline11(), Inline10(), Inline10("null")};
+  const std::string alphabet = "{}[]\",:0123456789.eE+-truefalsnul \\/xyz";
+  int read = 0, refused = 0;
+  for (int i = 0; i < kMutants; ++i) {
+    std::string text = sources[i % 3];
+    const int edits = 1 + static_cast<int>(rng() % 4);
+    for (int e = 0; e < edits && !text.empty(); ++e) {
+      const std::size_t pos = rng() % text.size();
+      switch (rng() % 4) {
+        case 0: text[pos] = alphabet[rng() % alphabet.size()]; break;
+        case 1: text.erase(pos, 1 + rng() % 8); break;
+        case 2: text.insert(pos, 1, alphabet[rng() % alphabet.size()]); break;
+        case 3: text.resize(pos); break;
+      }
+    }
+    try {
+      const MaterialReadResult r = ReadMaterialJson(text, "mutant.u3m");
+      ++read;
+      try {
+        const MaterialWriteResult w = WriteMaterialJson(r.material, {}, "out.u3m");
+        const MaterialReadResult again = ReadMaterialJson(w.text, "out.u3m");  // what we write, we read
+        for (const Issue& issue : again.issues)
+          EXPECT_NE(issue.severity, IssueSeverity::kError) << "mutant " << i << ": " << issue.pointer << ": " << issue.message;
+      } catch (const InputError&) {
+      }
+    } catch (const InputError&) {
+      ++refused;
+    }
+  }
+  EXPECT_EQ(read + refused, kMutants);
+  EXPECT_GT(read, 0);
+  EXPECT_GT(refused, 0);
 }
 
 TEST(MaterialJson, ToleratedDeviationsAreReportedWithPointers) {
