@@ -40,6 +40,9 @@ constexpr double kSheenGrid[] = {0.0, 0.35, 0.7, 1.0};
 constexpr double kSheenGridMinGrazing = 0.01;
 // Pixels of the observation image sampled for its median luminance (the noise floor level).
 constexpr int kLevelSamples = 4096;
+// Smallest sigma of an observation channel, relative to its level: keeps weights finite when the
+// noise floor is 0 and a value is 0.
+constexpr double kMinSigmaFraction = 1e-6;
 // Normals whose length is outside this band are missing data, not unit vectors.
 constexpr double kMinNormalLength = 0.5;
 constexpr double kMaxNormalLength = 1.5;
@@ -158,7 +161,10 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
     lo.irradiance = e;
     lo.rgb = rgb;
     const double floor = options.noise_floor * info.level;
-    for (int c = 0; c < 3; ++c) lo.weight(c) = 1.0 / (floor + options.noise_relative * std::abs(rgb(c)));
+    const double min_sigma = kMinSigmaFraction * info.level;  // noise_floor may be 0
+    for (int c = 0; c < 3; ++c) {
+      lo.weight(c) = 1.0 / std::max(min_sigma, floor + options.noise_relative * std::abs(rgb(c)));
+    }
     if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(rgb) / (l.z() * e));
     ++count;
   }
@@ -661,13 +667,25 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   context.stack = &stack;
   context.geometry = &geometry;
   context.options = &options;
+  std::vector<double> levels;
   for (const Observation& o : stack.observations) {
     ObservationInfo info;
     info.observation = &o;
     info.light = &stack.lights[o.light];
     info.view = &stack.views[o.view];
     info.level = MedianLuminance(o, pixel_count);
+    if (info.level > 0.0) levels.push_back(info.level);
     context.observations.push_back(info);
+  }
+  // An observation without signal (light blocked, dark frame) borrows the typical level, so that
+  // its noise floor, and with it every weight, stays finite.
+  double typical_level = 1.0;
+  if (!levels.empty()) {
+    std::nth_element(levels.begin(), levels.begin() + levels.size() / 2, levels.end());
+    typical_level = levels[levels.size() / 2];
+  }
+  for (ObservationInfo& info : context.observations) {
+    if (!(info.level > 0.0)) info.level = typical_level;
   }
   const std::size_t n_obs = stack.observations.size();
 
@@ -769,6 +787,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
   for (int i = 0; i < kFitParameterCount; ++i) {
+    if (!measured_any[i]) continue;  // left out: no image at all (memory at 36 MP)
     result.parameter_maps[i] =
         Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
   }
@@ -816,7 +835,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
           result.base_color.at(ch, row, col) = static_cast<float>(v);
         }
-        for (int i = 0; i < kFitParameterCount; ++i) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+        for (int i = 0; i < kFitParameterCount; ++i) {
+          if (measured_any[i]) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+        }
         result.cluster_id.at(0, row, col) = static_cast<float>(c);
       }
     }
@@ -843,7 +864,6 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         if (result.clusters[c].pixel_count > result.clusters[largest].pixel_count) largest = c;
       }
       report.reason = "not measured: " + result.clusters[largest].parameters[i].reason;
-      result.parameter_maps[i] = Image();
       continue;
     }
     report.measured = true;

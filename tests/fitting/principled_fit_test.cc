@@ -237,7 +237,9 @@ TEST_F(PrincipledFitTest, MetallicOnlyWhenTheDataDemandIt) {
     return p;
   };
   const Scene scene = MakeScene(spec);
-  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  FitOptions options;
+  options.clustering.cluster_count = 2;  // one material; each poorly fitted cluster costs a refit
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
   MaybePrint("MetallicOnlyWhenTheDataDemandIt", result);
   ExpectFinite(result);
   EXPECT_TRUE(result.report(FitParameter::kMetallic).measured) << result.report(FitParameter::kMetallic).reason;
@@ -338,6 +340,23 @@ TEST_F(PrincipledFitTest, StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan) {
   } else {
     EXPECT_FALSE(result.convergence.messages.empty());
   }
+}
+
+TEST_F(PrincipledFitTest, DarkObservationAndMissingNormalsStayFinite) {
+  SceneSpec spec;
+  spec.width = 8;
+  spec.height = 8;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int, int) { return PrincipledParams<double>(); };
+  Scene scene = MakeScene(spec);
+  for (float& v : scene.stack.observations[0].rgb.data()) v = 0.0f;  // a light that did not fire
+  for (int c = 0; c < 3; ++c) scene.geometry.normals.at(c, 2, 3) = 0.0f;  // no normal: no data
+  FitOptions options;
+  options.noise_floor = 0.0;  // the weights must still be finite
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  ExpectFinite(result);
+  EXPECT_EQ(result.cluster_id.at(0, 2, 3), -1.0f);
+  EXPECT_EQ(result.convergence.pixels_fitted, 63);
 }
 
 TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
