@@ -433,6 +433,13 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
     params = start;
   }
+  // Restart the colour's luminance iteration from this solution: later solves and the
+  // observability step then need only `luminance_passes` (2) passes to be converged.
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    const Eigen::Vector3d c =
+        SolveBaseColor(params, samples.pixel(p), Settings(options, params, candidates, samples.luminance_start[p]));
+    if (c.allFinite()) samples.luminance_start[p] = std::max(kMinStartLuminance, Luminance(c));
+  }
   const SolveOutcome first = outcome;
   int iterations = first.iterations;
 

@@ -64,8 +64,9 @@ struct FitOptions {
   double function_tolerance = 1e-8;
   double parameter_tolerance = 1e-10;
   double gradient_tolerance = 1e-12;
-  // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
-  int luminance_passes = 4;
+  // Passes of the secant iteration for the luminance of the base colour when a tint is in play
+  // (each pass is one BRDF evaluation per observation; the start is refreshed after each solve).
+  int luminance_passes = 2;
   // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
   // the convergence messages (the Principled model does not explain its data).
   double mismatch_relative_rms = 0.05;
