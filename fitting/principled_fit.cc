@@ -654,6 +654,19 @@ std::string JsonString(const std::string& s) {
 
 }  // namespace
 
+const char* U3mParameterName(FitParameter parameter) {
+  switch (parameter) {
+    case FitParameter::kRoughness: return "roughness";
+    case FitParameter::kSpecular: return "specular_value";
+    case FitParameter::kSpecularTint: return "specular_tint";
+    case FitParameter::kSheen: return "sheen_value";
+    case FitParameter::kSheenTint: return "sheen_tint";
+    case FitParameter::kAnisotropic: return "anisotropy_value";
+    case FitParameter::kMetallic: return "metalness";
+  }
+  throw std::logic_error("U3mParameterName: unknown parameter");
+}
+
 bool FitOptions::Check() const {
   return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
@@ -667,6 +680,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   const auto t_start = Clock::now();
   ValidateInputs(stack, geometry, options);
   FitResult result;
+  result.options = options;
   const MetricGrid& grid = stack.grid;
   const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
 
@@ -801,6 +815,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   std::atomic<std::int64_t> fitted{0}, refined{0};
   std::vector<std::int64_t> cluster_pixels(k, 0);
   std::mutex count_mutex;
+  std::size_t rows_done = 0;  // under count_mutex
   const double gloss_threshold = -std::log(1.0 - options.pixel_min_specular_fraction);
   ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
     PixelBuffers buffers(n_obs);
@@ -852,6 +867,8 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     refined += local_refined;
     std::lock_guard lock(count_mutex);
     for (int c = 0; c < k; ++c) cluster_pixels[c] += local_pixels[c];
+    rows_done += row_end - row_begin;
+    ReportProgress(progress, "fit: pixels", static_cast<double>(rows_done) / grid.height);
   });
   for (int c = 0; c < k; ++c) result.clusters[c].pixel_count = cluster_pixels[c];
   result.convergence.pixels_fitted = fitted;
@@ -906,7 +923,6 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     }
   }
   result.times.total_s = Seconds(t_start);
-  ReportProgress(progress, "fit: pixels", 1.0);
   LogInfo() << "fitting: " << k << " clusters, " << result.convergence.pixels_fitted << " pixels ("
             << result.convergence.pixels_refined << " refined) in " << result.times.total_s << " s";
   return result;
@@ -962,7 +978,8 @@ std::string FitResultToJson(const FitResult& result) {
   j << "{\n  \"maps\": {";
   for (int i = 0; i < kFitParameterCount; ++i) {
     const MapReport& m = result.maps[i];
-    j << (i ? "," : "") << "\n    " << JsonString(FitParameterName(i)) << ": {\"measured\": "
+    j << (i ? "," : "") << "\n    " << JsonString(FitParameterName(i))
+      << ": {\"u3m\": " << JsonString(U3mParameterName(static_cast<FitParameter>(i))) << ", \"measured\": "
       << (m.measured ? "true" : "false") << ", \"constant\": " << (m.constant ? "true" : "false")
       << ", \"texture\": " << (m.measured && !m.constant ? "true" : "false") << ", \"value\": " << JsonNumber(m.value)
       << ", \"spread\": " << JsonNumber(m.spread) << ", \"reason\": " << JsonString(m.reason) << "}";
@@ -1002,7 +1019,19 @@ std::string FitResultToJson(const FitResult& result) {
   const StageTimes& t = result.times;
   j << "]},\n  \"times_s\": {\"gather\": " << JsonNumber(t.gather_s) << ", \"clustering\": " << JsonNumber(t.clustering_s)
     << ", \"cluster_fit\": " << JsonNumber(t.cluster_fit_s) << ", \"observability\": " << JsonNumber(t.observability_s)
-    << ", \"per_pixel\": " << JsonNumber(t.per_pixel_s) << ", \"total\": " << JsonNumber(t.total_s) << "}\n}\n";
+    << ", \"per_pixel\": " << JsonNumber(t.per_pixel_s) << ", \"total\": " << JsonNumber(t.total_s) << "},\n";
+  const FitOptions& o = result.options;
+  const char* loss = o.robust_loss.kind == RobustLossKind::kHuber    ? "huber"
+                     : o.robust_loss.kind == RobustLossKind::kCauchy ? "cauchy"
+                                                                     : "none";
+  j << "  \"options\": {\"cluster_count\": " << o.clustering.cluster_count
+    << ", \"samples_per_cluster\": " << o.samples_per_cluster << ", \"noise_relative\": " << JsonNumber(o.noise_relative)
+    << ", \"noise_floor\": " << JsonNumber(o.noise_floor) << ", \"robust_loss\": " << JsonString(loss)
+    << ", \"robust_scale_sigma\": " << JsonNumber(o.robust_loss.scale)
+    << ", \"observability_max_std\": " << JsonNumber(o.observability.max_std)
+    << ", \"observability_effective_pixels\": " << o.observability.effective_pixels
+    << ", \"refine_per_pixel\": " << (o.refine_per_pixel ? "true" : "false") << ", \"seed\": " << o.clustering.seed
+    << "}\n}\n";
   return j.str();
 }
 

@@ -134,6 +134,10 @@ struct ConvergenceReport {
   std::int64_t pixels_refined = 0;      // pixels whose own roughness / specular were kept
 };
 
+// The U3M visualization key a parameter map belongs to ("roughness", "specular_value",
+// "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness").
+const char* U3mParameterName(FitParameter parameter);
+
 struct FitResult {
   // Per-pixel maps on the stack's grid (pitch_mm set). base_color is 3 channels, linear RGB,
   // clamped to [0, 1]. A scalar map whose parameter was not measured is EMPTY (maps[i].measured is
@@ -145,6 +149,7 @@ struct FitResult {
   std::vector<ClusterFit> clusters;
   ConvergenceReport convergence;
   StageTimes times;
+  FitOptions options;  // as used, for the report
 
   const Image& map(FitParameter p) const { return parameter_maps[static_cast<int>(p)]; }
   const MapReport& report(FitParameter p) const { return maps[static_cast<int>(p)]; }
@@ -170,8 +175,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
 Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
                    const Observation& observation);
 
-// The fit report as JSON text (for fit.json): per-cluster parameters with uncertainties, the map
-// decisions (measured / constant / left out and why), convergence, times per stage.
+// The fit report as JSON text (for fit.json): the map decisions (measured / constant / left out
+// and why, with U3M key names), per-cluster parameters with uncertainties, convergence, times per
+// stage and the main options. Format: docs/fitting.md.
 std::string FitResultToJson(const FitResult& result);
 
 }  // namespace u3mscan::fitting

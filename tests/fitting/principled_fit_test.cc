@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <map>
 #include <random>
 #include <set>
 
@@ -259,8 +260,17 @@ TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
     return p;
   };
   const Scene scene = MakeScene(spec);
-  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  std::map<std::string, double> progress;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions(),
+                                         [&](std::string_view stage, double fraction) {
+                                           double& last = progress[std::string(stage)];
+                                           EXPECT_GE(fraction, last) << stage;
+                                           last = fraction;
+                                         });
   MaybePrint("UniformSampleUnderPointLightsGivesConstantMaps", result);
+  EXPECT_EQ(progress["fit: clusters"], 1.0);
+  EXPECT_EQ(progress["fit: pixels"], 1.0);
+  EXPECT_NE(FitResultToJson(result).find("\"u3m\": \"specular_value\""), std::string::npos);
   const MapReport& roughness = result.report(FitParameter::kRoughness);
   EXPECT_TRUE(roughness.measured);
   EXPECT_TRUE(roughness.constant) << roughness.reason;
