@@ -31,6 +31,12 @@ constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
 constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
 constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 
+// Relative RMS residual above which a cluster counts as poorly explained: the option, or twice
+// the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
+double MismatchThreshold(const FitOptions& options) {
+  return std::max(options.mismatch_relative_rms, 2.0 * options.noise_relative);
+}
+
 // Coarse start grid (roughness, specular, sheen). Roughness starts above sqrt(kMinAlpha) = 0.032,
 // where GGX's alpha clamp would zero its derivative.
 constexpr double kRoughnessGrid[] = {0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
@@ -474,7 +480,8 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   // within mismatch_relative_rms), chi^2 drops by more than default_rejection_chi2 and metallic is
   // then measured. Observability is decided again for the new model.
   const int metal = kMetallic;
-  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > options.mismatch_relative_rms) {
+  const double mismatch_rms = MismatchThreshold(options);
+  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > mismatch_rms) {
     ParameterMask free = decision.measured;
     free[metal] = true;
     ParameterVector trial = params;
@@ -488,7 +495,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
       ObservabilityDecision metal_decision = decide(trial, free);
       const double gain = EffectiveChi2Increase(cost_metal, cost_now, context, options.observability);
       // Demanded = the metallic model explains the data (not merely a better misfit).
-      const bool explains = summarise(trial, free, nullptr) <= options.mismatch_relative_rms;
+      const bool explains = summarise(trial, free, nullptr) <= mismatch_rms;
       if (explains && gain > options.observability.default_rejection_chi2 && metal_decision.measured[metal]) {
         params = trial;
         iterations += metal_outcome.iterations;
@@ -528,11 +535,13 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
 
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
 // cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
-// residual buffers come from the caller. Returns which parameters were kept.
-// `color` receives the closed-form base colour at the returned parameters (saves a solve).
+// residual buffers come from the caller. Returns how many parameters were kept; their posterior
+// std goes to (*kept_sd)[parameter] (others untouched). `color` receives the closed-form base
+// colour at the returned parameters (saves a solve).
 int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
                 double luminance_start, const ParameterVector& cluster, ParameterVector& params,
-                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color) {
+                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color,
+                ParameterVector* kept_sd) {
   int index[kMaxPixelParameters];
   int k = 0;
   if (measured[kRoughness]) index[k++] = kRoughness;
@@ -604,13 +613,19 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     }
     if (!accepted) break;
   }
-  // Keep a refined value only where the pixel's own data pins it down.
-  const Matrix2 covariance = h.inverse();  // h of the last linearisation (identity rows unused)
+  // Keep a refined value only where the pixel's own data pins it down. The covariance comes from
+  // the last linearisation (identity rows unused), inflated by the pixel's reduced chi^2 when the
+  // noise model underestimates its scatter (as for the clusters).
+  const Matrix2 covariance = h.inverse();
+  double chi2 = 0.0;
+  for (std::size_t i = 0; i < m; ++i) chi2 += r0[i] * r0[i];
+  const double inflation = m > static_cast<std::size_t>(k) ? std::max(1.0, chi2 / static_cast<double>(m - k)) : 1.0;
   int kept = 0;
   for (int a = 0; a < k; ++a) {
-    const double sd = std::sqrt(std::max(0.0, covariance(a, a)));
+    const double sd = std::sqrt(std::max(0.0, covariance(a, a)) * inflation);
     if (std::isfinite(sd) && sd < options.pixel_max_std) {
       ++kept;
+      (*kept_sd)[index[a]] = sd;
     } else {
       params[index[a]] = cluster[index[a]];
     }
@@ -774,12 +789,12 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
       LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
     }
-    if (c.rms_relative_residual > options.mismatch_relative_rms) {
+    if (c.rms_relative_residual > MismatchThreshold(options)) {
       char buffer[200];
       std::snprintf(buffer, sizeof buffer,
                     "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
                     "not explain these pixels; expect biased parameters)",
-                    c.id, c.rms_relative_residual, options.mismatch_relative_rms);
+                    c.id, c.rms_relative_residual, MismatchThreshold(options));
       result.convergence.messages.push_back(buffer);
       LogWarning() << "fitting: " << buffer;
     }
@@ -815,7 +830,8 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   std::atomic<std::int64_t> fitted{0}, refined{0};
   std::vector<std::int64_t> cluster_pixels(k, 0);
   std::mutex count_mutex;
-  std::size_t rows_done = 0;  // under count_mutex
+  std::size_t rows_done = 0;          // under count_mutex
+  ParameterVector variance_delta{};  // under count_mutex: sum of (pixel variance - cluster variance)
   const double gloss_threshold = -std::log(1.0 - options.pixel_min_specular_fraction);
   ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
     PixelBuffers buffers(n_obs);
@@ -825,6 +841,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     jac.reserve(3 * n_obs * kMaxPixelParameters);
     std::vector<std::int64_t> local_pixels(k, 0);
     std::int64_t local_fitted = 0, local_refined = 0;
+    ParameterVector local_variance_delta{};
     float feature[kAppearanceFeatureCount];
     for (std::size_t row = row_begin; row < row_end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
@@ -846,9 +863,17 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         Eigen::Vector3d color;
         if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
+          ParameterVector kept_sd;
+          kept_sd.fill(-1.0);
           if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
-                          jac, &color) > 0) {
+                          jac, &color, &kept_sd) > 0) {
             ++local_refined;
+            // The pixel's own uncertainty replaces the cluster's in the pooled uncertainty.
+            for (int i = 0; i < kFitParameterCount; ++i) {
+              if (kept_sd[i] < 0.0) continue;
+              const double cluster_sd = result.clusters[c].parameters[i].std_dev;
+              local_variance_delta[i] += kept_sd[i] * kept_sd[i] - (std::isfinite(cluster_sd) ? cluster_sd * cluster_sd : 0.0);
+            }
           }
         } else {
           color = SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
@@ -867,6 +892,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     refined += local_refined;
     std::lock_guard lock(count_mutex);
     for (int c = 0; c < k; ++c) cluster_pixels[c] += local_pixels[c];
+    for (int i = 0; i < kFitParameterCount; ++i) variance_delta[i] += local_variance_delta[i];
     rows_done += row_end - row_begin;
     ReportProgress(progress, "fit: pixels", static_cast<double>(rows_done) / grid.height);
   });
@@ -911,7 +937,8 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     const double mean = n > 0 ? sum / n : FitParameterDefault(p);
     report.value = mean;
     report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
-    const double pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
+    // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
+    const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
     if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
       char buffer[160];

@@ -67,8 +67,9 @@ struct FitOptions {
   // Passes of the secant iteration for the luminance of the base colour when a tint is in play
   // (each pass is one BRDF evaluation per observation; the start is refreshed after each solve).
   int luminance_passes = 2;
-  // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
-  // the convergence messages (the Principled model does not explain its data).
+  // A cluster whose relative RMS residual exceeds max(this, 2 * noise_relative) is reported as a
+  // likely model mismatch in the convergence messages (the Principled model does not explain its
+  // data).
   double mismatch_relative_rms = 0.05;
   // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
   // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
