@@ -52,7 +52,7 @@ constexpr double kMinSigmaFraction = 1e-6;
 // Normals whose length is outside this band are missing data, not unit vectors.
 constexpr double kMinNormalLength = 0.5;
 constexpr double kMaxNormalLength = 1.5;
-// Smallest luminance to start the base-colour fixed point from.
+// Smallest luminance to start the base-colour luminance passes from.
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;

@@ -406,6 +406,20 @@ TEST_F(PrincipledFitTest, DarkObservationAndMissingNormalsStayFinite) {
   EXPECT_EQ(result.convergence.pixels_fitted, 63);
 }
 
+TEST_F(PrincipledFitTest, RunsAreDeterministic) {
+  SceneSpec spec;
+  spec.width = 8;
+  spec.height = 8;
+  spec.lights_deg = OverheadLights();
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, false); };
+  const Scene scene = MakeScene(spec);
+  const FitResult a = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  const FitResult b = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  EXPECT_EQ(a.base_color.data(), b.base_color.data());
+  EXPECT_EQ(a.cluster_id.data(), b.cluster_id.data());
+  for (int i = 0; i < kFitParameterCount; ++i) EXPECT_EQ(a.parameter_maps[i].data(), b.parameter_maps[i].data());
+}
+
 TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
   SceneSpec spec;
   spec.width = 4;
