@@ -533,7 +533,8 @@ TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
 }
 
 // Throughput check, not a correctness test (no test asserts time): a 512 x 512 grid (0.26 MP)
-// with the overhead rig, default options. Run explicitly:
+// with the overhead rig (16 observations; U3MSCAN_FIT_OBLIQUE=1: oblique rig, 40), default options.
+// Run explicitly:
 //   fitting_tests --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_Throughput*'
 // and scale the per-pixel time linearly to 36 MP (cluster fits do not grow with the image).
 TEST_F(PrincipledFitTest, DISABLED_Throughput) {
@@ -542,6 +543,10 @@ TEST_F(PrincipledFitTest, DISABLED_Throughput) {
   spec.height = 512;
   spec.pitch_mm = 0.02;
   spec.lights_deg = OverheadLights();
+  if (std::getenv("U3MSCAN_FIT_OBLIQUE") != nullptr) {  // 20 lights x 2 views = 40 observations
+    for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+    spec.oblique_view = true;
+  }
   spec.material = [&](int col, int row) { return TwoFabrics(col / 8, row / 8, spec.width / 8, false); };
   const Scene scene = MakeScene(spec);
   FitOptions options;
