@@ -284,6 +284,40 @@ TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
   EXPECT_NE(FitResultToJson(result).find("\"texture\": false"), std::string::npos);
 }
 
+TEST_F(PrincipledFitTest, MeasuredIrradianceImagesTakePrecedence) {
+  // Flat-field irradiance per observation (Observation::irradiance) must replace the analytic
+  // light model: the analytic profile is made wrong, the images carry the truth.
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.point_light_distance_mm = 30.0;
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.35, 0.4, 0.3) * (1.0 + 0.05 * std::sin(0.5 * col - row));
+    p.roughness = 0.4;
+    p.specular = 0.5;
+    return p;
+  };
+  Scene scene = MakeScene(spec);
+  for (Observation& o : scene.stack.observations) {
+    const LightModel& light = scene.stack.lights[o.light];
+    o.irradiance = Image(spec.width, spec.height, 1, 0.0f, spec.pitch_mm);
+    for (int row = 0; row < spec.height; ++row) {
+      for (int col = 0; col < spec.width; ++col) {
+        const Eigen::Vector3d p = scene.stack.grid.PixelCentreInWorld(col, row, scene.geometry.height_mm.at(0, row, col));
+        o.irradiance.at(0, row, col) = static_cast<float>(light.RelativeIrradianceAt(p));
+      }
+    }
+  }
+  for (LightModel& light : scene.stack.lights) light.profile_exponent = 200.0;  // wrong on purpose
+  FitOptions options;
+  options.clustering.cluster_count = 2;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  ExpectFinite(result);
+  ExpectRecovered(scene, result, FitParameter::kRoughness, kExactParameterTolerance);
+  ExpectRecovered(scene, result, FitParameter::kSpecular, kExactParameterTolerance);
+  ExpectBaseColorRecovered(scene, result);
+}
+
 TEST_F(PrincipledFitTest, NoisyUniformSampleIsConstantNotNoise) {
   // 6 % noise: per-pixel refinement scatters roughness by its own uncertainty (beyond the absolute
   // tolerance of 0.01); a map whose spread is that noise must come out as a constant, not as a
