@@ -3,13 +3,14 @@
 // reconstruction's per-pixel normals, albedo and height. Algorithm and figures: docs/fitting.md.
 //
 // Stages (each timed):
-//   1. gather:        per pixel, the usable observations in its local shading frame (z = normal,
-//                     x = world +x projected into the tangent plane) and its appearance features;
+//   1. gather:        for an evenly strided candidate set of pixels, the usable observations in
+//                     the local shading frame (z = normal, x = world +x projected into the
+//                     tangent plane) and the appearance features;
 //   2. clustering:    k-means on albedo and gloss profile (fitting/clustering.h);
 //   3. cluster fit:   per cluster, the shared parameters (roughness, specular, tints, sheen,
-//                     anisotropic, optionally metallic) on a deterministic sample of its pixels,
-//                     base colour per pixel in closed form; coarse grid start, then Ceres
-//                     (Levenberg-Marquardt, bounds [0, 1]); clusters run in parallel;
+//                     anisotropic; metallic only when the data demand it) on a deterministic
+//                     sample of its pixels, base colour per pixel in closed form; coarse grid
+//                     start, then Ceres (Levenberg-Marquardt, bounds [0, 1]); clusters in parallel;
 //   4. observability: parameters the capture does not constrain are left out (U3M default, no
 //                     texture) and the cluster refitted without them (fitting/observability.h);
 //   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
