@@ -19,7 +19,7 @@ namespace {
 constexpr double kLumR = 0.3;
 constexpr double kLumG = 0.6;
 constexpr double kLumB = 0.1;
-// Smallest luminance the fixed-point passes use: a black pixel gives the core's white tint anyway.
+// Smallest luminance the luminance passes use: a black pixel gives the core's white tint anyway.
 constexpr double kMinLuminance = 1e-6;
 // Guards a weighted normal equation whose diagonal vanishes (no diffuse signal at all).
 constexpr double kTinyNormal = 1e-300;

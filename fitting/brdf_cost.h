@@ -79,13 +79,13 @@ struct RobustLoss {
 // How one pixel's residuals are formed.
 struct PixelCostSettings {
   RobustLoss loss;
-  // Luminance of the base colour to start the fixed-point passes from (any positive guess).
+  // Luminance of the base colour to start the luminance passes from (any positive guess).
   double luminance_start = 0.2;
   // Passes (base-colour solves) for l = lum(C); 1 is exact when no tint is in play.
   int luminance_passes = 1;
 };
 
-// Number of fixed-point passes needed for the given parameters: 1 when both tints are held at 0,
+// Number of luminance passes needed for the given parameters: 1 when both tints are held at 0,
 // `tinted_passes` otherwise.
 int LuminancePassesFor(const ParameterVector& params, const ParameterMask& free, int tinted_passes);
 

@@ -34,6 +34,12 @@ constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 // is left out after all (end of the cluster fit).
 constexpr double kFinalStdFactor = 2.0;
 
+// Relative RMS residual above which a cluster counts as poorly explained: the option, or twice
+// the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
+double MismatchThreshold(const FitOptions& options) {
+  return std::max(options.mismatch_relative_rms, 2.0 * options.noise_relative);
+}
+
 // Coarse start grid (roughness, specular, sheen). Roughness starts above sqrt(kMinAlpha) = 0.032,
 // where GGX's alpha clamp would zero its derivative.
 constexpr double kRoughnessGrid[] = {0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
@@ -43,10 +49,13 @@ constexpr double kSheenGrid[] = {0.0, 0.35, 0.7, 1.0};
 constexpr double kSheenGridMinGrazing = 0.01;
 // Pixels of the observation image sampled for its median luminance (the noise floor level).
 constexpr int kLevelSamples = 4096;
+// Smallest sigma of an observation channel, relative to its level: keeps weights finite when the
+// noise floor is 0 and a value is 0.
+constexpr double kMinSigmaFraction = 1e-6;
 // Normals whose length is outside this band are missing data, not unit vectors.
 constexpr double kMinNormalLength = 0.5;
 constexpr double kMaxNormalLength = 1.5;
-// Smallest luminance to start the base-colour fixed point from.
+// Smallest luminance to start the base-colour luminance passes from.
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
@@ -175,7 +184,10 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
     lo.irradiance = e;
     lo.rgb = rgb;
     const double floor = options.noise_floor * info.level;
-    for (int c = 0; c < 3; ++c) lo.weight(c) = 1.0 / (floor + options.noise_relative * std::abs(rgb(c)));
+    const double min_sigma = kMinSigmaFraction * info.level;  // noise_floor may be 0
+    for (int c = 0; c < 3; ++c) {
+      lo.weight(c) = 1.0 / std::max(min_sigma, floor + options.noise_relative * std::abs(rgb(c)));
+    }
     if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(rgb) / (l.z() * e));
     ++count;
   }
@@ -526,6 +538,13 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
     params = start;
   }
+  // Restart the colour's luminance iteration from this solution: later solves and the
+  // observability step then need only `luminance_passes` (2) passes to be converged.
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    const Eigen::Vector3d c =
+        SolveBaseColor(params, samples.pixel(p), Settings(options, params, candidates, samples.luminance_start[p]));
+    if (c.allFinite()) samples.luminance_start[p] = std::max(kMinStartLuminance, Luminance(c));
+  }
   const SolveOutcome first = outcome;
   int iterations = first.iterations;
 
@@ -560,7 +579,8 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   // within mismatch_relative_rms), chi^2 drops by more than default_rejection_chi2 and metallic is
   // then measured. Observability is decided again for the new model.
   const int metal = kMetallic;
-  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > options.mismatch_relative_rms) {
+  const double mismatch_rms = MismatchThreshold(options);
+  if (!candidates[metal] && options.metallic_if_demanded && fit.rms_relative_residual > mismatch_rms) {
     ParameterMask free = decision.measured;
     free[metal] = true;
     ParameterVector trial = params;
@@ -574,7 +594,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
       ObservabilityDecision metal_decision = decide(trial, free);
       const double gain = EffectiveChi2Increase(cost_metal, cost_now, context, options.observability);
       // Demanded = the metallic model explains the data (not merely a better misfit).
-      const bool explains = summarise(trial, free, nullptr) <= options.mismatch_relative_rms;
+      const bool explains = summarise(trial, free, nullptr) <= mismatch_rms;
       if (explains && gain > options.observability.default_rejection_chi2 && metal_decision.measured[metal]) {
         params = trial;
         iterations += metal_outcome.iterations;
@@ -625,11 +645,13 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
 
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
 // cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
-// residual buffers come from the caller. Returns which parameters were kept.
-// `color` receives the closed-form base colour at the returned parameters (saves a solve).
+// residual buffers come from the caller. Returns how many parameters were kept; their posterior
+// std goes to (*kept_sd)[parameter] (others untouched). `color` receives the closed-form base
+// colour at the returned parameters (saves a solve).
 int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
                 double luminance_start, const ParameterVector& cluster, ParameterVector& params,
-                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color) {
+                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color,
+                ParameterVector* kept_sd) {
   int index[kMaxPixelParameters];
   int k = 0;
   if (measured[kRoughness]) index[k++] = kRoughness;
@@ -701,13 +723,19 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     }
     if (!accepted) break;
   }
-  // Keep a refined value only where the pixel's own data pins it down.
-  const Matrix2 covariance = h.inverse();  // h of the last linearisation (identity rows unused)
+  // Keep a refined value only where the pixel's own data pins it down. The covariance comes from
+  // the last linearisation (identity rows unused), inflated by the pixel's reduced chi^2 when the
+  // noise model underestimates its scatter (as for the clusters).
+  const Matrix2 covariance = h.inverse();
+  double chi2 = 0.0;
+  for (std::size_t i = 0; i < m; ++i) chi2 += r0[i] * r0[i];
+  const double inflation = m > static_cast<std::size_t>(k) ? std::max(1.0, chi2 / static_cast<double>(m - k)) : 1.0;
   int kept = 0;
   for (int a = 0; a < k; ++a) {
-    const double sd = std::sqrt(std::max(0.0, covariance(a, a)));
+    const double sd = std::sqrt(std::max(0.0, covariance(a, a)) * inflation);
     if (std::isfinite(sd) && sd < options.pixel_max_std) {
       ++kept;
+      (*kept_sd)[index[a]] = sd;
     } else {
       params[index[a]] = cluster[index[a]];
     }
@@ -751,6 +779,19 @@ std::string JsonString(const std::string& s) {
 
 }  // namespace
 
+const char* U3mParameterName(FitParameter parameter) {
+  switch (parameter) {
+    case FitParameter::kRoughness: return "roughness";
+    case FitParameter::kSpecular: return "specular_value";
+    case FitParameter::kSpecularTint: return "specular_tint";
+    case FitParameter::kSheen: return "sheen_value";
+    case FitParameter::kSheenTint: return "sheen_tint";
+    case FitParameter::kAnisotropic: return "anisotropy_value";
+    case FitParameter::kMetallic: return "metalness";
+  }
+  throw std::logic_error("U3mParameterName: unknown parameter");
+}
+
 bool FitOptions::Check() const {
   return clustering.Check() && observability.Check() && samples_per_cluster >= 1 && grid_samples_per_cluster >= 1 &&
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
@@ -765,6 +806,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   const auto t_start = Clock::now();
   ValidateInputs(stack, geometry, options);
   FitResult result;
+  result.options = options;
   const MetricGrid& grid = stack.grid;
   const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
 
@@ -772,13 +814,25 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   context.stack = &stack;
   context.geometry = &geometry;
   context.options = &options;
+  std::vector<double> levels;
   for (const Observation& o : stack.observations) {
     ObservationInfo info;
     info.observation = &o;
     info.light = &stack.lights[o.light];
     info.view = &stack.views[o.view];
     info.level = MedianLuminance(o, pixel_count);
+    if (info.level > 0.0) levels.push_back(info.level);
     context.observations.push_back(info);
+  }
+  // An observation without signal (light blocked, dark frame) borrows the typical level, so that
+  // its noise floor, and with it every weight, stays finite.
+  double typical_level = 1.0;
+  if (!levels.empty()) {
+    std::nth_element(levels.begin(), levels.begin() + levels.size() / 2, levels.end());
+    typical_level = levels[levels.size() / 2];
+  }
+  for (ObservationInfo& info : context.observations) {
+    if (!(info.level > 0.0)) info.level = typical_level;
   }
   const std::size_t n_obs = stack.observations.size();
 
@@ -876,12 +930,12 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
       LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
     }
-    if (c.rms_relative_residual > options.mismatch_relative_rms) {
+    if (c.rms_relative_residual > MismatchThreshold(options)) {
       char buffer[200];
       std::snprintf(buffer, sizeof buffer,
                     "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
                     "not explain these pixels; expect biased parameters)",
-                    c.id, c.rms_relative_residual, options.mismatch_relative_rms);
+                    c.id, c.rms_relative_residual, MismatchThreshold(options));
       result.convergence.messages.push_back(buffer);
       LogWarning() << "fitting: " << buffer;
     }
@@ -929,12 +983,15 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
   for (int i = 0; i < kFitParameterCount; ++i) {
+    if (!measured_any[i]) continue;  // left out: no image at all (memory at 36 MP)
     result.parameter_maps[i] =
         Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
   }
   std::atomic<std::int64_t> fitted{0}, refined{0};
   std::vector<std::int64_t> cluster_pixels(k, 0);
   std::mutex count_mutex;
+  std::size_t rows_done = 0;          // under count_mutex
+  ParameterVector variance_delta{};  // under count_mutex: sum of (pixel variance - cluster variance)
   const double gloss_threshold = -std::log(1.0 - options.pixel_min_specular_fraction);
   ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
     PixelBuffers buffers(n_obs);
@@ -944,6 +1001,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     jac.reserve(3 * n_obs * kMaxPixelParameters);
     std::vector<std::int64_t> local_pixels(k, 0);
     std::int64_t local_fitted = 0, local_refined = 0;
+    ParameterVector local_variance_delta{};
     float feature[kAppearanceFeatureCount];
     for (std::size_t row = row_begin; row < row_end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
@@ -965,9 +1023,17 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         Eigen::Vector3d color;
         if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
+          ParameterVector kept_sd;
+          kept_sd.fill(-1.0);
           if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
-                          jac, &color) > 0) {
+                          jac, &color, &kept_sd) > 0) {
             ++local_refined;
+            // The pixel's own uncertainty replaces the cluster's in the pooled uncertainty.
+            for (int i = 0; i < kFitParameterCount; ++i) {
+              if (kept_sd[i] < 0.0) continue;
+              const double cluster_sd = result.clusters[c].parameters[i].std_dev;
+              local_variance_delta[i] += kept_sd[i] * kept_sd[i] - (std::isfinite(cluster_sd) ? cluster_sd * cluster_sd : 0.0);
+            }
           }
         } else {
           color = SolveBaseColor(params, obs, Settings(options, params, cluster_measured[c], cluster_luminance[c]));
@@ -976,7 +1042,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
           result.base_color.at(ch, row, col) = static_cast<float>(v);
         }
-        for (int i = 0; i < kFitParameterCount; ++i) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+        for (int i = 0; i < kFitParameterCount; ++i) {
+          if (measured_any[i]) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+        }
         result.cluster_id.at(0, row, col) = static_cast<float>(c);
       }
     }
@@ -984,6 +1052,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     refined += local_refined;
     std::lock_guard lock(count_mutex);
     for (int c = 0; c < k; ++c) cluster_pixels[c] += local_pixels[c];
+    for (int i = 0; i < kFitParameterCount; ++i) variance_delta[i] += local_variance_delta[i];
+    rows_done += row_end - row_begin;
+    ReportProgress(progress, "fit: pixels", static_cast<double>(rows_done) / grid.height);
   });
   for (int c = 0; c < k; ++c) result.clusters[c].pixel_count = cluster_pixels[c];
   result.convergence.pixels_fitted = fitted;
@@ -1003,7 +1074,6 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         if (result.clusters[c].pixel_count > result.clusters[largest].pixel_count) largest = c;
       }
       report.reason = "not measured: " + result.clusters[largest].parameters[i].reason;
-      result.parameter_maps[i] = Image();
       continue;
     }
     report.measured = true;
@@ -1027,8 +1097,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     const double mean = n > 0 ? sum / n : FitParameterDefault(p);
     report.value = mean;
     report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / n - mean * mean)) : 0.0;
-    const double pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
-    if (pooled_std > options.observability.max_std) {
+    // Leave-out rule on the clusters' own uncertainty (the map as the clusters know it).
+    const double cluster_pooled_std = n_pooled > 0 ? std::sqrt(pooled / n_pooled) : 0.0;
+    if (cluster_pooled_std > options.observability.max_std) {
       // Each cluster passed its own leave-out rule (up to kFinalStdFactor max_std at the final
       // solution), but the map as a whole is not known to max_std: left out, never reported measured
       // with a value the capture does not pin down (e.g. sheen 0 on a velvet seen only from above).
@@ -1043,7 +1114,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       std::snprintf(buffer, sizeof buffer,
                     "not measured: not constrained by this capture (posterior std pooled over the clusters %.3g > %.3g; "
                     "worst cluster %d: %.3g); ",
-                    pooled_std, options.observability.max_std, worst, result.clusters[worst].parameters[i].std_dev);
+                    cluster_pooled_std, options.observability.max_std, worst, result.clusters[worst].parameters[i].std_dev);
       report.measured = false;
       report.constant = false;
       report.value = FitParameterDefault(p);
@@ -1052,6 +1123,8 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       result.parameter_maps[i] = Image();
       continue;
     }
+    // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
+    const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
     if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
       char buffer[160];
@@ -1063,7 +1136,6 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     }
   }
   result.times.total_s = Seconds(t_start);
-  ReportProgress(progress, "fit: pixels", 1.0);
   LogInfo() << "fitting: " << k << " clusters, " << result.convergence.pixels_fitted << " pixels ("
             << result.convergence.pixels_refined << " refined) in " << result.times.total_s << " s";
   return result;
@@ -1119,7 +1191,8 @@ std::string FitResultToJson(const FitResult& result) {
   j << "{\n  \"maps\": {";
   for (int i = 0; i < kFitParameterCount; ++i) {
     const MapReport& m = result.maps[i];
-    j << (i ? "," : "") << "\n    " << JsonString(FitParameterName(i)) << ": {\"measured\": "
+    j << (i ? "," : "") << "\n    " << JsonString(FitParameterName(i))
+      << ": {\"u3m\": " << JsonString(U3mParameterName(static_cast<FitParameter>(i))) << ", \"measured\": "
       << (m.measured ? "true" : "false") << ", \"constant\": " << (m.constant ? "true" : "false")
       << ", \"texture\": " << (m.measured && !m.constant ? "true" : "false") << ", \"value\": " << JsonNumber(m.value)
       << ", \"spread\": " << JsonNumber(m.spread) << ", \"reason\": " << JsonString(m.reason) << "}";
@@ -1159,7 +1232,19 @@ std::string FitResultToJson(const FitResult& result) {
   const StageTimes& t = result.times;
   j << "]},\n  \"times_s\": {\"gather\": " << JsonNumber(t.gather_s) << ", \"clustering\": " << JsonNumber(t.clustering_s)
     << ", \"cluster_fit\": " << JsonNumber(t.cluster_fit_s) << ", \"observability\": " << JsonNumber(t.observability_s)
-    << ", \"per_pixel\": " << JsonNumber(t.per_pixel_s) << ", \"total\": " << JsonNumber(t.total_s) << "}\n}\n";
+    << ", \"per_pixel\": " << JsonNumber(t.per_pixel_s) << ", \"total\": " << JsonNumber(t.total_s) << "},\n";
+  const FitOptions& o = result.options;
+  const char* loss = o.robust_loss.kind == RobustLossKind::kHuber    ? "huber"
+                     : o.robust_loss.kind == RobustLossKind::kCauchy ? "cauchy"
+                                                                     : "none";
+  j << "  \"options\": {\"cluster_count\": " << o.clustering.cluster_count
+    << ", \"samples_per_cluster\": " << o.samples_per_cluster << ", \"noise_relative\": " << JsonNumber(o.noise_relative)
+    << ", \"noise_floor\": " << JsonNumber(o.noise_floor) << ", \"robust_loss\": " << JsonString(loss)
+    << ", \"robust_scale_sigma\": " << JsonNumber(o.robust_loss.scale)
+    << ", \"observability_max_std\": " << JsonNumber(o.observability.max_std)
+    << ", \"observability_effective_pixels\": " << o.observability.effective_pixels
+    << ", \"refine_per_pixel\": " << (o.refine_per_pixel ? "true" : "false") << ", \"seed\": " << o.clustering.seed
+    << "}\n}\n";
   return j.str();
 }
 

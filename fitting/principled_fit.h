@@ -3,13 +3,14 @@
 // reconstruction's per-pixel normals, albedo and height. Algorithm and figures: docs/fitting.md.
 //
 // Stages (each timed):
-//   1. gather:        per pixel, the usable observations in its local shading frame (z = normal,
-//                     x = world +x projected into the tangent plane) and its appearance features;
+//   1. gather:        for an evenly strided candidate set of pixels, the usable observations in
+//                     the local shading frame (z = normal, x = world +x projected into the
+//                     tangent plane) and the appearance features;
 //   2. clustering:    k-means on albedo and gloss profile (fitting/clustering.h);
 //   3. cluster fit:   per cluster, the shared parameters (roughness, specular, tints, sheen,
-//                     anisotropic, optionally metallic) on a deterministic sample of its pixels,
-//                     base colour per pixel in closed form; coarse grid start, then Ceres
-//                     (Levenberg-Marquardt, bounds [0, 1]); clusters run in parallel;
+//                     anisotropic; metallic only when the data demand it) on a deterministic
+//                     sample of its pixels, base colour per pixel in closed form; coarse grid
+//                     start, then Ceres (Levenberg-Marquardt, bounds [0, 1]); clusters in parallel;
 //   4. observability: parameters the capture does not constrain are left out (U3M default, no
 //                     texture) and the cluster refitted without them (fitting/observability.h);
 //   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
@@ -64,10 +65,12 @@ struct FitOptions {
   double function_tolerance = 1e-8;
   double parameter_tolerance = 1e-10;
   double gradient_tolerance = 1e-12;
-  // Passes of the secant iteration for the luminance of the base colour when a tint is in play.
-  int luminance_passes = 4;
-  // A cluster whose relative RMS residual exceeds this is reported as a likely model mismatch in
-  // the convergence messages (the Principled model does not explain its data).
+  // Passes of the secant iteration for the luminance of the base colour when a tint is in play
+  // (each pass is one BRDF evaluation per observation; the start is refreshed after each solve).
+  int luminance_passes = 2;
+  // A cluster whose relative RMS residual exceeds max(this, 2 * noise_relative) is reported as a
+  // likely model mismatch in the convergence messages (the Principled model does not explain its
+  // data).
   double mismatch_relative_rms = 0.05;
   // A cluster whose relative RMS residual exceeds this measures nothing: every shared parameter is
   // left out with the reason (the model does not explain the data; values would be biased).
@@ -144,6 +147,10 @@ struct ConvergenceReport {
   std::int64_t pixels_refined = 0;      // pixels whose own roughness / specular were kept
 };
 
+// The U3M visualization key a parameter map belongs to ("roughness", "specular_value",
+// "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness").
+const char* U3mParameterName(FitParameter parameter);
+
 struct FitResult {
   // Per-pixel maps on the stack's grid (pitch_mm set). base_color is 3 channels, linear RGB,
   // clamped to [0, 1]. A scalar map whose parameter was not measured is EMPTY (maps[i].measured is
@@ -155,6 +162,7 @@ struct FitResult {
   std::vector<ClusterFit> clusters;
   ConvergenceReport convergence;
   StageTimes times;
+  FitOptions options;  // as used, for the report
 
   const Image& map(FitParameter p) const { return parameter_maps[static_cast<int>(p)]; }
   const MapReport& report(FitParameter p) const { return maps[static_cast<int>(p)]; }
@@ -180,8 +188,9 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
 Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
                    const Observation& observation);
 
-// The fit report as JSON text (for fit.json): per-cluster parameters with uncertainties, the map
-// decisions (measured / constant / left out and why), convergence, times per stage.
+// The fit report as JSON text (for fit.json): the map decisions (measured / constant / left out
+// and why, with U3M key names), per-cluster parameters with uncertainties, convergence, times per
+// stage and the main options. Format: docs/fitting.md.
 std::string FitResultToJson(const FitResult& result);
 
 }  // namespace u3mscan::fitting

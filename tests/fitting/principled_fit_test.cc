@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <map>
 #include <random>
 #include <set>
 
@@ -29,6 +30,12 @@ constexpr double kExactColorTolerance = 2e-3;
 constexpr double kHeldOutRelativeRmse = 0.02;
 // Stiff case: a roughness the data exclude from being large.
 constexpr double kStiffRoughnessBound = 0.1;
+// Sensor-like noise (relative, Gaussian per channel) and the issue's accuracy targets.
+constexpr double kNoiseRelative = 0.01;
+constexpr double kHighNoiseRelative = 0.06;
+constexpr double kTargetRoughnessError = 0.05;
+constexpr double kTargetSpecularError = 0.1;
+constexpr double kTargetSheenError = 0.1;
 
 // Two fabrics side by side: a near-grey matte-ish weave and a coloured, tinted, glossier one;
 // base colour varies per pixel so that per-pixel colour matters.
@@ -237,7 +244,9 @@ TEST_F(PrincipledFitTest, MetallicOnlyWhenTheDataDemandIt) {
     return p;
   };
   const Scene scene = MakeScene(spec);
-  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  FitOptions options;
+  options.clustering.cluster_count = 2;  // one material; each poorly fitted cluster costs a refit
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
   MaybePrint("MetallicOnlyWhenTheDataDemandIt", result);
   ExpectFinite(result);
   EXPECT_TRUE(result.report(FitParameter::kMetallic).measured) << result.report(FitParameter::kMetallic).reason;
@@ -257,13 +266,87 @@ TEST_F(PrincipledFitTest, UniformSampleUnderPointLightsGivesConstantMaps) {
     return p;
   };
   const Scene scene = MakeScene(spec);
-  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  std::map<std::string, double> progress;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions(),
+                                         [&](std::string_view stage, double fraction) {
+                                           double& last = progress[std::string(stage)];
+                                           EXPECT_GE(fraction, last) << stage;
+                                           last = fraction;
+                                         });
   MaybePrint("UniformSampleUnderPointLightsGivesConstantMaps", result);
+  EXPECT_EQ(progress["fit: clusters"], 1.0);
+  EXPECT_EQ(progress["fit: pixels"], 1.0);
+  EXPECT_NE(FitResultToJson(result).find("\"u3m\": \"specular_value\""), std::string::npos);
   const MapReport& roughness = result.report(FitParameter::kRoughness);
   EXPECT_TRUE(roughness.measured);
   EXPECT_TRUE(roughness.constant) << roughness.reason;
   EXPECT_NEAR(roughness.value, 0.35, kExactParameterTolerance);
   EXPECT_NE(FitResultToJson(result).find("\"texture\": false"), std::string::npos);
+}
+
+TEST_F(PrincipledFitTest, MeasuredIrradianceImagesTakePrecedence) {
+  // Flat-field irradiance per observation (Observation::irradiance) must replace the analytic
+  // light model: the analytic profile is made wrong, the images carry the truth.
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.point_light_distance_mm = 30.0;
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.35, 0.4, 0.3) * (1.0 + 0.05 * std::sin(0.5 * col - row));
+    p.roughness = 0.4;
+    p.specular = 0.5;
+    return p;
+  };
+  Scene scene = MakeScene(spec);
+  for (Observation& o : scene.stack.observations) {
+    const LightModel& light = scene.stack.lights[o.light];
+    o.irradiance = Image(spec.width, spec.height, 1, 0.0f, spec.pitch_mm);
+    for (int row = 0; row < spec.height; ++row) {
+      for (int col = 0; col < spec.width; ++col) {
+        const Eigen::Vector3d p = scene.stack.grid.PixelCentreInWorld(col, row, scene.geometry.height_mm.at(0, row, col));
+        o.irradiance.at(0, row, col) = static_cast<float>(light.RelativeIrradianceAt(p));
+      }
+    }
+  }
+  for (LightModel& light : scene.stack.lights) light.profile_exponent = 200.0;  // wrong on purpose
+  FitOptions options;
+  options.clustering.cluster_count = 2;
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  ExpectFinite(result);
+  ExpectRecovered(scene, result, FitParameter::kRoughness, kExactParameterTolerance);
+  ExpectRecovered(scene, result, FitParameter::kSpecular, kExactParameterTolerance);
+  ExpectBaseColorRecovered(scene, result);
+}
+
+TEST_F(PrincipledFitTest, NoisyUniformSampleIsConstantNotNoise) {
+  // 6 % noise: per-pixel refinement scatters roughness by its own uncertainty (beyond the absolute
+  // tolerance of 0.01); a map whose spread is that noise must come out as a constant, not as a
+  // texture of noise.
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int col, int row) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.45, 0.3, 0.25) * (1.0 + 0.05 * std::sin(0.9 * col + 0.3 * row));
+    p.roughness = 0.3;
+    p.specular = 0.6;
+    return p;
+  };
+  Scene scene = MakeScene(spec);
+  std::mt19937 rng(31);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(kHighNoiseRelative));
+  for (Observation& o : scene.stack.observations) {
+    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
+  }
+  FitOptions options;
+  options.noise_relative = kHighNoiseRelative;  // the operator's noise model matches the sensor
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  MaybePrint("NoisyUniformSampleIsConstantNotNoise", result);
+  EXPECT_TRUE(result.convergence.messages.empty()) << "noise alone is not a model mismatch";
+  const MapReport& roughness = result.report(FitParameter::kRoughness);
+  EXPECT_TRUE(roughness.measured);
+  EXPECT_GT(roughness.spread, ObservabilityOptions().uniform_abs_tolerance) << "the test must exercise the rule";
+  EXPECT_TRUE(roughness.constant) << roughness.reason << " spread " << roughness.spread;
+  EXPECT_NEAR(roughness.value, 0.3, kTargetRoughnessError);
 }
 
 TEST_F(PrincipledFitTest, BoundsAreRespectedOnDataBeyondTheModel) {
@@ -340,6 +423,37 @@ TEST_F(PrincipledFitTest, StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan) {
   }
 }
 
+TEST_F(PrincipledFitTest, DarkObservationAndMissingNormalsStayFinite) {
+  SceneSpec spec;
+  spec.width = 8;
+  spec.height = 8;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int, int) { return PrincipledParams<double>(); };
+  Scene scene = MakeScene(spec);
+  for (float& v : scene.stack.observations[0].rgb.data()) v = 0.0f;  // a light that did not fire
+  for (int c = 0; c < 3; ++c) scene.geometry.normals.at(c, 2, 3) = 0.0f;  // no normal: no data
+  FitOptions options;
+  options.noise_floor = 0.0;  // the weights must still be finite
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
+  ExpectFinite(result);
+  EXPECT_EQ(result.cluster_id.at(0, 2, 3), -1.0f);
+  EXPECT_EQ(result.convergence.pixels_fitted, 63);
+}
+
+TEST_F(PrincipledFitTest, RunsAreDeterministic) {
+  SceneSpec spec;
+  spec.width = 8;
+  spec.height = 8;
+  spec.lights_deg = OverheadLights();
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, false); };
+  const Scene scene = MakeScene(spec);
+  const FitResult a = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  const FitResult b = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  EXPECT_EQ(a.base_color.data(), b.base_color.data());
+  EXPECT_EQ(a.cluster_id.data(), b.cluster_id.data());
+  for (int i = 0; i < kFitParameterCount; ++i) EXPECT_EQ(a.parameter_maps[i].data(), b.parameter_maps[i].data());
+}
+
 TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
   SceneSpec spec;
   spec.width = 4;
@@ -359,11 +473,7 @@ TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
 }
 
 // The issue's accuracy targets on a capture with sensor-like noise: 1 % Gaussian per channel
-// (seeded), oblique rig, four lights held out of the fit.
-constexpr double kNoiseRelative = 0.01;
-constexpr double kTargetRoughnessError = 0.05;
-constexpr double kTargetSpecularError = 0.1;
-constexpr double kTargetSheenError = 0.1;
+// (seeded), oblique rig, four lights held out of the fit (constants at the top of the file).
 // Held-out images compared with the noise-free truth: noise does not count against the fit.
 
 TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
@@ -488,7 +598,8 @@ TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
 }
 
 // Throughput check, not a correctness test (no test asserts time): a 512 x 512 grid (0.26 MP)
-// with the overhead rig, default options. Run explicitly:
+// with the overhead rig (16 observations; U3MSCAN_FIT_OBLIQUE=1: oblique rig, 40), default options.
+// Run explicitly:
 //   fitting_tests --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_Throughput*'
 // and scale the per-pixel time linearly to 36 MP (cluster fits do not grow with the image).
 TEST_F(PrincipledFitTest, DISABLED_Throughput) {
@@ -497,6 +608,10 @@ TEST_F(PrincipledFitTest, DISABLED_Throughput) {
   spec.height = 512;
   spec.pitch_mm = 0.02;
   spec.lights_deg = OverheadLights();
+  if (std::getenv("U3MSCAN_FIT_OBLIQUE") != nullptr) {  // 20 lights x 2 views = 40 observations
+    for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+    spec.oblique_view = true;
+  }
   spec.material = [&](int col, int row) { return TwoFabrics(col / 8, row / 8, spec.width / 8, false); };
   const Scene scene = MakeScene(spec);
   FitOptions options;
