@@ -3,10 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <ctime>
 #include <fstream>
-#include <iomanip>
-#include <sstream>
 #include <system_error>
 
 #include "capture/rectification.h"
@@ -18,6 +15,7 @@
 #include "pipeline/stages.h"
 #include "u3m/image_io.h"
 #include "u3m/material.h"
+#include "u3m/material_json.h"
 #include "u3mscan/version.h"
 
 namespace u3mscan {
@@ -29,13 +27,13 @@ namespace {
 constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
 
-std::string UtcNowText() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  std::ostringstream s;
-  s << std::put_time(&tm, "%Y-%m-%dT%H:%M:%SZ");
-  return s.str();
+
+// --created: the u3m reader's RFC 3339 parser, restricted to UTC written with 'Z' (the form the
+// conventions ask writers for), so a material never gets a time the operator did not mean.
+std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text) {
+  const std::optional<ParsedTimestamp> parsed = ParseTimestamp(text);
+  if (!parsed || !parsed->has_zone || parsed->has_offset || parsed->space_separator) return std::nullopt;
+  return parsed->utc_ms;
 }
 
 nlohmann::json Vector3Json(const Eigen::Vector3d& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); }
@@ -117,24 +115,6 @@ bool ProcessOptions::Check(std::string* why) const {
   return true;
 }
 
-std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text) {
-  std::tm tm{};
-  int millis = 0;
-  std::istringstream in(text);
-  in >> std::get_time(&tm, "%Y-%m-%dT%H:%M:%S");
-  if (in.fail()) return std::nullopt;
-  char c = 0;
-  in.get(c);
-  if (c == '.') {
-    std::string digits;
-    while (in.get(c) && std::isdigit(static_cast<unsigned char>(c))) digits += c;
-    if (digits.empty() || digits.size() > 9) return std::nullopt;
-    millis = std::stoi((digits + "00").substr(0, 3));
-  }
-  if (c != 'Z' || in.get(c)) return std::nullopt;
-  const std::time_t seconds = timegm(&tm);
-  return static_cast<std::int64_t>(seconds) * 1000 + millis;
-}
 
 fs::path MaterialPathFor(const CaptureJob& job, const ProcessOptions& options) {
   return job.out_dir / (job.name + (options.package ? ".u3ma" : ".u3m"));
@@ -162,7 +142,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   report.capture_name = job.name;
   report.capture_path = job.capture_dir.string();
   report.output_path = job.out_dir.string();
-  report.started_utc = UtcNowText();
+  report.started_utc = FormatUtcTimestamp(NowUtcMs());
   report.preset = PresetName(options.preset);
 
   StageOptions stages = OptionsForPreset(options.preset);

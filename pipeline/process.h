@@ -48,7 +48,4 @@ std::filesystem::path MaterialPathFor(const CaptureJob& job, const ProcessOption
 // True when the job's material and a report.json with status "ok" exist.
 bool IsOutputComplete(const CaptureJob& job, const ProcessOptions& options);
 
-// "2026-11-22T10:00:00Z" (optionally with .fff) -> UTC milliseconds; nullopt when malformed.
-std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text);
-
 }  // namespace u3mscan
