@@ -41,6 +41,11 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
   sub.add_option("--seed", args->options.seed, "Seed of scene, rig and noise")->capture_default_str();
   sub.add_option("--format", args->format, "Frame files: dng (Bayer RAW), tiff (16-bit RGB) or exr (float RGB)")->capture_default_str();
   sub.add_option("--dpi", args->options.dpi, "Ground resolution of the top camera and the scene grid")->capture_default_str();
+  sub.add_option("--supersample", args->options.supersample,
+                 "Rays per camera pixel along each axis (the pixel integrates light over its area; the scene is sampled "
+                 "as many times finer, memory permitting, and the truth is its area average on the output grid). "
+                 "0 = auto: 3 up to 1.5 MP, 2 up to 12 MP, 1 above")
+      ->capture_default_str();
   sub.add_flag("--no-calibration", args->no_calibration, "Write sample and ambient frames only");
   sub.add_flag("--no-pose", args->no_pose, "Leave camera poses out of capture.json (calibration finds them from the board)");
   sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();

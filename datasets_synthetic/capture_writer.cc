@@ -7,6 +7,7 @@
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <system_error>
 #include <vector>
 
@@ -319,13 +320,15 @@ SceneTruth CompletedScene(const SceneTruth& scene) {
 // captures of one seed carry the same noise.
 std::string NoiseName(const std::string& file) { return fs::path(file).replace_extension().generic_string(); }
 
-void WriteEverything(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options, const fs::path& root,
-                     const TruthWriter& truth_writer, CaptureStats* stats) {
+void WriteEverything(const SceneTruth& render_scene, const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
+                     const fs::path& root, const TruthWriter& truth_writer, CaptureStats* stats) {
   const CalibrationTargets targets = MakeCalibrationTargets(rig);
-  const std::vector<FrameJob> jobs = PlanFrames(scene, rig, options, targets);
+  const std::vector<FrameJob> jobs = PlanFrames(render_scene, rig, options, targets);
   const fs::path capture_dir = root / kCaptureSubdir;
   fs::create_directories(capture_dir);
-  SceneRenderer renderer(scene, rig);
+  RenderOptions render_options;
+  render_options.supersample = options.supersample;
+  SceneRenderer renderer(render_scene, rig, render_options);
   for (std::size_t k = 0; k < jobs.size(); ++k) {
     const FrameJob& job = jobs[k];
     const RigCamera& cam = rig.cameras[job.camera];
@@ -373,7 +376,20 @@ std::optional<FrameFormat> FrameFormatFromName(const std::string& name) {
 
 CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
                                    const fs::path& out_dir, const TruthWriter& truth_writer) {
+  return WriteSyntheticCapture(scene, scene, rig, options, out_dir, truth_writer);
+}
+
+CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTruth& scene, const Rig& rig,
+                                   const CaptureOptions& options, const fs::path& out_dir,
+                                   const TruthWriter& truth_writer) {
   const auto start = Clock::now();
+  if (!options.Check()) throw std::invalid_argument("WriteSyntheticCapture: supersample must be >= 1");
+  // Same rectangle: the renderer centres render_scene on the origin, the manifest's grid is scene's.
+  const double tolerance = 1e-9 * (1.0 + scene.height_mm.width() * scene.pitch_mm + scene.height_mm.height() * scene.pitch_mm);
+  if (std::abs(render_scene.height_mm.width() * render_scene.pitch_mm - scene.height_mm.width() * scene.pitch_mm) > tolerance ||
+      std::abs(render_scene.height_mm.height() * render_scene.pitch_mm - scene.height_mm.height() * scene.pitch_mm) > tolerance) {
+    throw std::invalid_argument("WriteSyntheticCapture: the rendered scene and the truth cover different rectangles");
+  }
   std::error_code ec;
   if (fs::exists(out_dir, ec) && !(fs::is_directory(out_dir, ec) && fs::is_empty(out_dir, ec))) {
     throw InputError(out_dir.string(), "", "an output folder that does not exist yet or is empty");
@@ -390,7 +406,7 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, cons
   CaptureStats stats;
   try {
     fs::create_directories(temp);
-    WriteEverything(scene, rig, options, temp, truth_writer, &stats);
+    WriteEverything(render_scene, scene, rig, options, temp, truth_writer, &stats);
     if (fs::exists(target)) fs::remove(target);  // the empty folder the caller may have made
     fs::rename(temp, target);
   } catch (...) {

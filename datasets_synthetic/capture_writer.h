@@ -46,9 +46,11 @@ struct CaptureOptions {
   FrameFormat format = FrameFormat::kDng;
   bool calibration_frames = true;  // dark, flat, board, sphere, chart, backlight
   bool write_pose = true;          // false: cameras without pose, calibration must find it (board)
+  // Rays per camera pixel along each axis for the sample frames (RenderOptions::supersample).
+  int supersample = 1;
   std::string scanner_software = "u3mscan";
   ProgressCallback progress;
-  bool Check() const { return true; }
+  bool Check() const { return supersample >= 1; }
 };
 
 struct CaptureStats {
@@ -63,6 +65,12 @@ struct CaptureStats {
 // naming out_dir when it cannot be used; any failure leaves no DIR behind.
 CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,
                                    const std::filesystem::path& out_dir, const TruthWriter& truth_writer = {});
+// The same, rendering `render_scene` (a finer sampling of the fabric, OversampledSceneOptions)
+// and writing `truth` (its AreaAverageScene on the output grid) as the truth; the manifest's
+// output grid is truth's. Both must cover the same rectangle (std::invalid_argument otherwise).
+CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTruth& truth, const Rig& rig,
+                                   const CaptureOptions& options, const std::filesystem::path& out_dir,
+                                   const TruthWriter& truth_writer = {});
 
 // Relative paths of the folders inside DIR.
 inline constexpr const char* kCaptureSubdir = "capture";

@@ -32,8 +32,8 @@ std::array<double, 3> BumpsNormal(double x_mm, double y_mm) {
 
 SphereCap SphereCapFor(const SceneOptions& options) {
   SphereCap cap;
-  cap.center_x_mm = PixelXMm(0, options.pitch_mm) + 0.5 * (options.width - 1) * options.pitch_mm;
-  cap.center_y_mm = PixelYMm(0, options.pitch_mm) - 0.5 * (options.height - 1) * options.pitch_mm;
+  cap.center_x_mm = options.origin_x_mm + PixelXMm(0, options.pitch_mm) + 0.5 * (options.width - 1) * options.pitch_mm;
+  cap.center_y_mm = options.origin_y_mm + PixelYMm(0, options.pitch_mm) - 0.5 * (options.height - 1) * options.pitch_mm;
   cap.base_radius_mm = 0.4 * std::min(options.width, options.height) * options.pitch_mm;
   cap.cap_height_mm = std::min(1.0, 0.25 * cap.base_radius_mm);
   cap.sphere_radius_mm = (cap.base_radius_mm * cap.base_radius_mm + cap.cap_height_mm * cap.cap_height_mm) /

@@ -220,16 +220,26 @@ void SceneRenderer::SetCamera(int camera_index) {
   camera_index_ = camera_index;
   ambient_ = Image();
   const RigCamera& cam = rig_.cameras[camera_index];
-  hits_.assign(static_cast<std::size_t>(cam.width) * cam.height * 4, 0.0f);
+  const int n = std::max(1, options_.supersample);
+  rays_per_pixel_ = n * n;
+  hits_.assign(static_cast<std::size_t>(cam.width) * cam.height * rays_per_pixel_ * 3, 0.0f);
+  vignetting_.assign(static_cast<std::size_t>(cam.width) * cam.height, 1.0f);
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < cam.width; ++col) {
-        const Eigen::Vector3d hit = Trace(cam.position_mm, PixelRayInWorld(cam, col, static_cast<double>(row)));
-        float* h = &hits_[(row * cam.width + col) * 4];
-        h[0] = static_cast<float>(hit.x());
-        h[1] = static_cast<float>(hit.y());
-        h[2] = static_cast<float>(hit.z());
-        h[3] = options_.vignetting ? static_cast<float>(Vignetting(cam, col, static_cast<double>(row))) : 1.0f;
+        const std::size_t pixel = row * cam.width + col;
+        float* h = &hits_[pixel * rays_per_pixel_ * 3];
+        for (int sy = 0; sy < n; ++sy) {
+          for (int sx = 0; sx < n; ++sx, h += 3) {
+            // Pixel (col, row) covers [col - 0.5, col + 0.5] x [row - 0.5, row + 0.5].
+            const double u = col + (sx + 0.5) / n - 0.5, v = static_cast<double>(row) + (sy + 0.5) / n - 0.5;
+            const Eigen::Vector3d hit = Trace(cam.position_mm, PixelRayInWorld(cam, u, v));
+            h[0] = static_cast<float>(hit.x());
+            h[1] = static_cast<float>(hit.y());
+            h[2] = static_cast<float>(hit.z());
+          }
+        }
+        if (options_.vignetting) vignetting_[pixel] = static_cast<float>(Vignetting(cam, col, static_cast<double>(row)));
       }
     }
   });
@@ -237,8 +247,13 @@ void SceneRenderer::SetCamera(int camera_index) {
 
 Eigen::Vector3d SceneRenderer::HitPoint(int col, int row) const {
   const RigCamera& cam = rig_.cameras.at(camera_index_);
-  const float* h = &hits_.at((static_cast<std::size_t>(row) * cam.width + col) * 4);
-  return {h[0], h[1], h[2]};
+  const std::size_t pixel = static_cast<std::size_t>(row) * cam.width + col;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (int k = 0; k < rays_per_pixel_; ++k) {
+    const float* h = &hits_.at((pixel * rays_per_pixel_ + k) * 3);
+    sum += Eigen::Vector3d(h[0], h[1], h[2]);
+  }
+  return sum / rays_per_pixel_;
 }
 
 bool SceneRenderer::InShadow(const Eigen::Vector3d& p, const Eigen::Vector3d& l) const {
@@ -278,36 +293,41 @@ Image SceneRenderer::RenderLight(int light_index) const {
   const SceneGrid grid(scene_);
   const float table_brdf = static_cast<float>(rig_.table_reflectance / kPi);
   const float exposure = static_cast<float>(rig_.exposure_s);
+  const float inv_rays = 1.0f / static_cast<float>(rays_per_pixel_);
   float* planes[3] = {out.plane(0).data(), out.plane(1).data(), out.plane(2).data()};
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < cam.width; ++col) {
         const std::size_t i = row * cam.width + col;
-        const float* h = &hits_[i * 4];
-        if (!std::isfinite(h[0])) continue;
-        const Eigen::Vector3d p(h[0], h[1], h[2]);
-        Eigen::Vector3d l_world;
-        const Eigen::Vector3d e = LightIrradiance(light, p, &l_world);
-        if (options_.shadows && InShadow(p, l_world)) continue;
-        const Vec3<float> l = ToVec3f(l_world);
-        const Vec3<float> v = ToVec3f((cam.position_mm - p).normalized());
-        Vec3<float> rgb = Vec3<float>::Zero();
-        Footprint f;
-        float alpha = 0.0f;
-        if (grid.Locate(p.x(), p.y(), &f)) {
-          const SurfacePoint sp = SampleSurface(scene_, f);
-          alpha = sp.alpha;
-          if (alpha > 0) {
-            Vec3<float> t, b;
-            LocalFrame(sp.normal, sp.tangent, &t, &b);
-            const Vec3<float> l_local(l.dot(t), l.dot(b), l.dot(sp.normal));
-            const Vec3<float> v_local(v.dot(t), v.dot(b), v.dot(sp.normal));
-            rgb = alpha * std::max(0.0f, l_local.z()) * EvaluateModel(scene_.model, sp.params, l_local, v_local);
+        Vec3<float> sum = Vec3<float>::Zero();
+        for (int k = 0; k < rays_per_pixel_; ++k) {
+          const float* h = &hits_[(i * rays_per_pixel_ + k) * 3];
+          if (!std::isfinite(h[0])) continue;
+          const Eigen::Vector3d p(h[0], h[1], h[2]);
+          Eigen::Vector3d l_world;
+          const Eigen::Vector3d e = LightIrradiance(light, p, &l_world);
+          if (options_.shadows && InShadow(p, l_world)) continue;
+          const Vec3<float> l = ToVec3f(l_world);
+          const Vec3<float> v = ToVec3f((cam.position_mm - p).normalized());
+          Vec3<float> rgb = Vec3<float>::Zero();
+          Footprint f;
+          float alpha = 0.0f;
+          if (grid.Locate(p.x(), p.y(), &f)) {
+            const SurfacePoint sp = SampleSurface(scene_, f);
+            alpha = sp.alpha;
+            if (alpha > 0) {
+              Vec3<float> t, b;
+              LocalFrame(sp.normal, sp.tangent, &t, &b);
+              const Vec3<float> l_local(l.dot(t), l.dot(b), l.dot(sp.normal));
+              const Vec3<float> v_local(v.dot(t), v.dot(b), v.dot(sp.normal));
+              rgb = alpha * std::max(0.0f, l_local.z()) * EvaluateModel(scene_.model, sp.params, l_local, v_local);
+            }
           }
+          if (alpha < 1) rgb += Vec3<float>::Constant((1 - alpha) * table_brdf * std::max(0.0f, l.z()));
+          sum += rgb.cwiseProduct(ToVec3f(e));
         }
-        if (alpha < 1) rgb += Vec3<float>::Constant((1 - alpha) * table_brdf * std::max(0.0f, l.z()));
-        const float scale = exposure * h[3];
-        for (int c = 0; c < 3; ++c) planes[c][i] = scale * rgb[c] * static_cast<float>(e[c]);
+        const float scale = exposure * vignetting_[i] * inv_rays;
+        for (int c = 0; c < 3; ++c) planes[c][i] = scale * sum[c];
       }
     }
   });
@@ -320,20 +340,24 @@ Image SceneRenderer::RenderAmbient() const {
   Image out(cam.width, cam.height, 3);
   const SceneGrid grid(scene_);
   // A uniform sky of irradiance E on a diffuse albedo a gives radiance a E / pi.
-  const float scale = static_cast<float>(rig_.exposure_s * rig_.ambient_irradiance / kPi);
+  const float scale = static_cast<float>(rig_.exposure_s * rig_.ambient_irradiance / kPi) / static_cast<float>(rays_per_pixel_);
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < cam.width; ++col) {
         const std::size_t i = row * cam.width + col;
-        const float* h = &hits_[i * 4];
-        if (!std::isfinite(h[0])) continue;
-        Vec3<float> albedo = Vec3<float>::Constant(static_cast<float>(rig_.table_reflectance));
-        Footprint f;
-        if (grid.Locate(h[0], h[1], &f)) {
-          const SurfacePoint sp = SampleSurface(scene_, f);
-          albedo = sp.alpha * sp.params.base_color * (1 - sp.params.metallic) + (1 - sp.alpha) * albedo;
+        Vec3<float> sum = Vec3<float>::Zero();
+        for (int k = 0; k < rays_per_pixel_; ++k) {
+          const float* h = &hits_[(i * rays_per_pixel_ + k) * 3];
+          if (!std::isfinite(h[0])) continue;
+          Vec3<float> albedo = Vec3<float>::Constant(static_cast<float>(rig_.table_reflectance));
+          Footprint f;
+          if (grid.Locate(h[0], h[1], &f)) {
+            const SurfacePoint sp = SampleSurface(scene_, f);
+            albedo = sp.alpha * sp.params.base_color * (1 - sp.params.metallic) + (1 - sp.alpha) * albedo;
+          }
+          sum += albedo;
         }
-        for (int c = 0; c < 3; ++c) out.plane(c)[i] = scale * h[3] * albedo[c];
+        for (int c = 0; c < 3; ++c) out.plane(c)[i] = scale * vignetting_[i] * sum[c];
       }
     }
   });
@@ -350,16 +374,21 @@ Image SceneRenderer::RenderBacklight(double level) const {
   const RigCamera& cam = rig_.cameras[camera_index_];
   Image out(cam.width, cam.height, 1);
   const SceneGrid grid(scene_);
+  const float scale = static_cast<float>(level) / static_cast<float>(rays_per_pixel_);
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < cam.width; ++col) {
         const std::size_t i = row * cam.width + col;
-        const float* h = &hits_[i * 4];
-        if (!std::isfinite(h[0])) continue;
-        Footprint f;
-        float transmitted = 1.0f;
-        if (grid.Locate(h[0], h[1], &f)) transmitted = 1.0f - std::clamp(SceneGrid::Sample(scene_.alpha, 0, f, 1.0f), 0.0f, 1.0f);
-        out.plane(0)[i] = static_cast<float>(level) * h[3] * transmitted;
+        float transmitted = 0.0f;
+        for (int k = 0; k < rays_per_pixel_; ++k) {
+          const float* h = &hits_[(i * rays_per_pixel_ + k) * 3];
+          if (!std::isfinite(h[0])) continue;
+          Footprint f;
+          float t = 1.0f;
+          if (grid.Locate(h[0], h[1], &f)) t = 1.0f - std::clamp(SceneGrid::Sample(scene_.alpha, 0, f, 1.0f), 0.0f, 1.0f);
+          transmitted += t;
+        }
+        out.plane(0)[i] = scale * vignetting_[i] * transmitted;
       }
     }
   });

@@ -6,8 +6,11 @@
 //
 // The sample (SceneTruth) lies centred on the world origin in z = 0: its pixel (col, row) centre is
 // at x = (col + 0.5 - W/2) pitch, y = (H/2 - row - 0.5) pitch, z = height_mm. Outside it, a
-// Lambertian table of Rig::table_reflectance at z = 0. Every camera pixel casts one ray through its
-// centre (undistorted), marches the height field and refines the hit by bisection, and shades it with
+// Lambertian table of Rig::table_reflectance at z = 0. A camera pixel integrates light over its
+// area: it casts supersample x supersample rays through a regular grid of points of its footprint
+// (exact undistortion per ray), each marches the height field (bilinear between the scene's
+// samples) and refines the hit by bisection; the pixel is the mean (a box filter) of the rays'
+// shading. Each ray is shaded with
 // the Principled BRDF of core/principled_brdf.h in the surface's local frame (z = normal, x = the
 // scene's tangent map, the fibre direction and axis of anisotropy, or +x projected onto the
 // tangent plane when the scene has none). Cast shadows: a march from the
@@ -31,6 +34,10 @@ struct RenderOptions {
   double shadow_bias_pitch = 0.01;
   // Ray-march step along the sample plane, in scene pixels; bisection refines the crossing.
   double march_step_pitch = 0.5;
+  // Rays per camera pixel along each axis, at the centres of an n x n split of the pixel: the
+  // pixel's value is their mean (a box filter over its area, as a sensor integrates). 1 = one ray
+  // through the pixel centre. Memory: 12 bytes per ray for the cached hits of one camera.
+  int supersample = 1;
 };
 
 // Renders one scene with one rig. Construct once, then SetCamera (traces that camera's rays once)
@@ -53,7 +60,8 @@ class SceneRenderer {
   // the camera sees the sample, (1 - alpha) of it comes through; around the sample, all of it.
   Image RenderBacklight(double level) const;
 
-  // Surface point the ray of pixel (col, row) hits (world, mm); valid after SetCamera.
+  // Surface point the rays of pixel (col, row) hit (world, mm), the mean of its rays' hits (the
+  // centre ray's hit when supersample = 1); valid after SetCamera.
   Eigen::Vector3d HitPoint(int col, int row) const;
   // True when the height field blocks the way from `point_mm` toward the light.
   bool InShadow(const Eigen::Vector3d& point_mm, const Eigen::Vector3d& direction_to_light) const;
@@ -69,7 +77,9 @@ class SceneRenderer {
   int camera_index_ = -1;
   double half_width_mm_ = 0, half_height_mm_ = 0;
   double min_height_mm_ = 0, max_height_mm_ = 0;
-  std::vector<float> hits_;  // x, y, z, vignetting per camera pixel
+  int rays_per_pixel_ = 1;       // supersample^2
+  std::vector<float> hits_;      // x, y, z per ray; a pixel's rays are consecutive; NaN: no hit
+  std::vector<float> vignetting_;  // per camera pixel, at its centre
   Image ambient_;            // AmbientImage() cache, empty until asked
 };
 

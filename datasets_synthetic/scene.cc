@@ -262,7 +262,8 @@ const std::map<std::string, Preset>& Presets() {
 }  // namespace internal
 
 bool SceneOptions::Check() const {
-  return width >= 1 && height >= 1 && std::isfinite(pitch_mm) && pitch_mm > 0.0;
+  return width >= 1 && height >= 1 && std::isfinite(pitch_mm) && pitch_mm > 0.0 && std::isfinite(origin_x_mm) &&
+         std::isfinite(origin_y_mm);
 }
 
 std::vector<std::string> SceneNames() {
@@ -286,6 +287,7 @@ SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
 
   const int w = options.width, h = options.height;
   const double pitch = options.pitch_mm;
+  const double x0 = options.origin_x_mm, y0 = options.origin_y_mm;
   SceneTruth truth;
   truth.name = name;
   truth.pitch_mm = pitch;
@@ -308,9 +310,9 @@ SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
   // tangent map for now; pass 2 turns it into a unit tangent orthogonal to the normal.
   ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
     for (auto row = static_cast<int>(begin); row < static_cast<int>(end); ++row) {
-      const double y = PixelYMm(row, pitch);
+      const double y = y0 + PixelYMm(row, pitch);
       for (int col = 0; col < w; ++col) {
-        const internal::SurfacePoint p = model.Evaluate(PixelXMm(col, pitch), y);
+        const internal::SurfacePoint p = model.Evaluate(x0 + PixelXMm(col, pitch), y);
         truth.height_mm.at(0, row, col) = p.height_mm;
         for (int c = 0; c < 3; ++c) truth.base_color.at(c, row, col) = p.base_color[c];
         truth.roughness.at(0, row, col) = p.roughness;
@@ -334,7 +336,7 @@ SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
   auto height_at = [&](int row, int col) -> double {
     if (row >= 0 && row < h && col >= 0 && col < w) return hm.at(0, row, col);
     // Same float rounding as the in-grid samples, so a border normal equals an interior one.
-    return static_cast<float>(model.HeightMm(PixelXMm(col, pitch), PixelYMm(row, pitch)));
+    return static_cast<float>(model.HeightMm(x0 + PixelXMm(col, pitch), y0 + PixelYMm(row, pitch)));
   };
   ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
     for (auto row = static_cast<int>(begin); row < static_cast<int>(end); ++row) {
@@ -367,6 +369,101 @@ SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
     }
   });
   return truth;
+}
+
+SceneOptions OversampledSceneOptions(const SceneOptions& coarse, int factor) {
+  if (factor < 1) throw std::invalid_argument("OversampledSceneOptions: factor must be >= 1");
+  if (factor == 1) return coarse;
+  SceneOptions fine = coarse;
+  fine.width = coarse.width * factor;
+  fine.height = coarse.height * factor;
+  fine.pitch_mm = coarse.pitch_mm / factor;
+  // Fine pixel 0 is centred half a fine pitch inside the coarse pixel's left (top) edge.
+  const double shift = (0.5 / factor - 0.5) * coarse.pitch_mm;
+  fine.origin_x_mm = coarse.origin_x_mm + shift;
+  fine.origin_y_mm = coarse.origin_y_mm - shift;
+  return fine;
+}
+
+namespace {
+
+// Box average of factor x factor blocks, every channel.
+Image BlockAverage(const Image& fine, int factor, double coarse_pitch) {
+  if (fine.empty()) return Image();
+  const int w = fine.width() / factor, h = fine.height() / factor, ch = fine.channels();
+  Image out(w, h, ch, 0.0f, coarse_pitch);
+  const double inv = 1.0 / (static_cast<double>(factor) * factor);
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (auto row = static_cast<int>(begin); row < static_cast<int>(end); ++row) {
+      for (int c = 0; c < ch; ++c) {
+        for (int col = 0; col < w; ++col) {
+          double sum = 0.0;
+          for (int j = 0; j < factor; ++j) {
+            for (int i = 0; i < factor; ++i) sum += fine.at(c, row * factor + j, col * factor + i);
+          }
+          out.at(c, row, col) = static_cast<float>(sum * inv);
+        }
+      }
+    }
+  });
+  return out;
+}
+
+}  // namespace
+
+SceneTruth AreaAverageScene(const SceneTruth& fine, int factor) {
+  if (factor < 1) throw std::invalid_argument("AreaAverageScene: factor must be >= 1");
+  if (factor == 1) return fine;
+  const int fw = fine.height_mm.width(), fh = fine.height_mm.height();
+  if (fw % factor != 0 || fh % factor != 0) {
+    throw std::invalid_argument("AreaAverageScene: a " + std::to_string(fw) + "x" + std::to_string(fh) +
+                                " grid is not a whole number of " + std::to_string(factor) + "x blocks");
+  }
+  SceneTruth t;
+  t.name = fine.name;
+  t.pitch_mm = fine.pitch_mm * factor;
+  t.seed = fine.seed;
+  t.model = fine.model;
+  t.height_min_mm = fine.height_min_mm;
+  t.height_max_mm = fine.height_max_mm;
+  t.repeat_x_mm = fine.repeat_x_mm;
+  t.repeat_y_mm = fine.repeat_y_mm;
+  t.description = fine.description;
+  t.yarns = fine.yarns;
+  for (auto member : {&SceneTruth::height_mm, &SceneTruth::normal, &SceneTruth::base_color, &SceneTruth::roughness,
+                      &SceneTruth::specular, &SceneTruth::specular_tint, &SceneTruth::sheen, &SceneTruth::sheen_tint,
+                      &SceneTruth::metallic, &SceneTruth::anisotropic, &SceneTruth::alpha, &SceneTruth::tangent}) {
+    t.*member = BlockAverage(fine.*member, factor, t.pitch_mm);
+  }
+  // Unit normals (the mean of unit vectors is shorter than one), tangents orthogonal to them.
+  if (!t.normal.empty()) {
+    const int w = t.normal.width(), h = t.normal.height();
+    ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+      for (auto row = static_cast<int>(begin); row < static_cast<int>(end); ++row) {
+        for (int col = 0; col < w; ++col) {
+          double n[3] = {t.normal.at(0, row, col), t.normal.at(1, row, col), t.normal.at(2, row, col)};
+          const double nl = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+          if (nl > 1e-12) {
+            for (double& v : n) v /= nl;
+          } else {
+            n[0] = n[1] = 0.0, n[2] = 1.0;
+          }
+          for (int c = 0; c < 3; ++c) t.normal.at(c, row, col) = static_cast<float>(n[c]);
+          if (t.tangent.empty()) continue;
+          double tv[3] = {t.tangent.at(0, row, col), t.tangent.at(1, row, col), t.tangent.at(2, row, col)};
+          const double dot = tv[0] * n[0] + tv[1] * n[1] + tv[2] * n[2];
+          for (int c = 0; c < 3; ++c) tv[c] -= dot * n[c];
+          double tl = std::sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2]);
+          if (tl < 1e-6) {  // fibres crossing at right angles cancel: fall back to +x in the plane
+            tv[0] = 1.0 - n[0] * n[0], tv[1] = -n[0] * n[1], tv[2] = -n[0] * n[2];
+            tl = std::sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2]);
+          }
+          for (int c = 0; c < 3; ++c) t.tangent.at(c, row, col) = static_cast<float>(tv[c] / tl);
+        }
+      }
+    });
+  }
+  return t;
 }
 
 }  // namespace u3mscan::synthetic

@@ -4,10 +4,15 @@
 // (renderer.h) lights and photographs it, the truth writer stores it as float EXR maps.
 //
 // Units: heights in mm (+z toward the camera), grid pitch in mm; colours linear RGB.
-// Grid: pixel (row, col) is the point sample of the fabric at x_mm = col * pitch_mm,
-// y_mm = -row * pitch_mm (world frame: x right, y up, z out of the fabric; rows grow with -y).
+// Grid: pixel (row, col) is the point sample of the fabric at x_mm = origin_x_mm + col * pitch_mm,
+// y_mm = origin_y_mm - row * pitch_mm (world frame: x right, y up, z out of the fabric; rows grow
+// with -y; the origin is 0 unless SceneOptions says otherwise).
 // The pattern is a function of (x_mm, y_mm) and the seed only, so a grid at twice the dpi samples
 // the same physical fabric: pixel (2r, 2c) at pitch p/2 equals pixel (r, c) at pitch p.
+//
+// A camera pixel integrates light over its area, so the synthetic scanner renders a scene sampled
+// `factor` times finer than the output grid (OversampledSceneOptions) and writes as truth the area
+// average of that fine scene over each output pixel (AreaAverageScene).
 // The presets are described in docs/synthetic-scenes.md.
 
 #include <array>
@@ -77,7 +82,10 @@ struct SceneOptions {
   int height = 64;
   double pitch_mm = 25.4 / 300.0;  // 300 dpi
   std::uint64_t seed = 1;
-  // True when width, height >= 1 and 0 < pitch_mm (finite).
+  // Pattern position (mm) of pixel (0, 0); see the grid note above. 0 for a preset's own grid.
+  double origin_x_mm = 0.0;
+  double origin_y_mm = 0.0;
+  // True when width, height >= 1, 0 < pitch_mm and the origin are finite.
   bool Check() const;
 };
 
@@ -89,8 +97,23 @@ std::vector<std::string> SceneNames();
 // for an unknown name or options that fail Check().
 SceneTruth MakeScene(const std::string& name, const SceneOptions& options);
 
-// World position (mm) of a pixel centre on the scene grid (see the grid note above).
+// Pattern position (mm) of a pixel centre on a scene grid with origin 0 (see the grid note above).
 inline double PixelXMm(int col, double pitch_mm) { return col * pitch_mm; }
 inline double PixelYMm(int row, double pitch_mm) { return -row * pitch_mm; }
+
+// The grid `factor` (>= 1) times finer on each axis that tiles exactly the footprints of the
+// pixels of `coarse`: coarse pixel (c, r), centred on the pattern point (x, y) and one pitch p
+// wide, holds fine pixels (f c + i, f r + j), i, j < f, centred at x + ((i + 0.5) / f - 0.5) p,
+// y - ((j + 0.5) / f - 0.5) p. factor 1 returns `coarse`.
+SceneOptions OversampledSceneOptions(const SceneOptions& coarse, int factor);
+
+// The truth of a scene on the grid `factor` times coarser than `fine` (made with
+// OversampledSceneOptions): each coarse pixel is the area average (midpoint rule over its
+// factor^2 fine pixels) of what the fine scene holds over its footprint. Heights, colours and the
+// Principled parameters are averaged, alpha is the covered fraction, normals are averaged then made
+// unit, tangents averaged, made orthogonal to that normal and unit. Scene-level fields (name,
+// seed, model, bounds, repeat, yarns) are copied; pitch_mm = factor * fine.pitch_mm. fine's size
+// must be a multiple of factor (std::invalid_argument otherwise).
+SceneTruth AreaAverageScene(const SceneTruth& fine, int factor);
 
 }  // namespace u3mscan::synthetic

@@ -29,6 +29,31 @@ void SynthOptions::Check() const {
     throw InputError("--size", "", "WxH with each side in [" + std::to_string(kMinSide) + ", " + std::to_string(kMaxSide) + "]");
   }
   if (!(dpi >= 10.0 && dpi <= 20000.0)) throw InputError("--dpi", "", "a resolution in [10, 20000] dots per inch");
+  if (supersample < 0 || supersample > kMaxSupersample) {
+    throw InputError("--supersample", "", "0 (auto) or rays per pixel axis in [1, " + std::to_string(kMaxSupersample) + "]");
+  }
+}
+
+int AutoSupersample(int width, int height) {
+  const double megapixels = 1e-6 * width * height;
+  if (megapixels <= 1.5) return 3;
+  if (megapixels <= 12.0) return 2;
+  return 1;
+}
+
+int SceneOversample(int supersample, int scene_width, int scene_height) {
+  constexpr double kSceneBytesPerPixel = 18 * sizeof(float);  // SceneTruth: 18 float channels
+  int factor = std::max(1, supersample);
+  while (factor > 1 && kSceneBytesPerPixel * scene_width * scene_height * factor * factor > kMaxFineSceneBytes) --factor;
+  return factor;
+}
+
+OversampledScene MakeOversampledScene(const std::string& name, const SceneOptions& grid, int supersample) {
+  OversampledScene s;
+  s.oversample = SceneOversample(supersample, grid.width, grid.height);
+  s.fine = MakeScene(name, OversampledSceneOptions(grid, s.oversample));
+  s.truth = AreaAverageScene(s.fine, s.oversample);
+  return s;
 }
 
 CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, const TruthWriter& truth_writer) {
@@ -44,11 +69,15 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   scene_options.height = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.height)));
   scene_options.pitch_mm = rig_options.pitch_mm;
   scene_options.seed = options.seed;
+  const int supersample = options.supersample > 0 ? options.supersample : AutoSupersample(options.width, options.height);
   const auto start = std::chrono::steady_clock::now();
-  const SceneTruth scene = MakeScene(options.scene, scene_options);
+  const OversampledScene scene = MakeOversampledScene(options.scene, scene_options, supersample);
   LogInfo() << "synth: scene '" << options.scene << "' " << scene_options.width << "x" << scene_options.height << " at "
-            << options.dpi << " dpi made in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
-  return WriteSyntheticCapture(scene, rig, options.capture, out_dir, truth_writer);
+            << options.dpi << " dpi, sampled " << scene.oversample << "x finer, " << supersample << "x" << supersample
+            << " rays per pixel; made in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
+  CaptureOptions capture = options.capture;
+  capture.supersample = supersample;
+  return WriteSyntheticCapture(scene.fine, scene.truth, rig, capture, out_dir, truth_writer);
 }
 
 }  // namespace u3mscan::synthetic

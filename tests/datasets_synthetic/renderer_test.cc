@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/parallel.h"
 #include "core/principled_brdf.h"
 #include "core/units.h"
 #include "datasets_synthetic/rig.h"
@@ -237,6 +238,141 @@ TEST(RendererTest, UnknownRigNameThrows) {
     EXPECT_GE(rig.lights.size(), 8u) << name;
     EXPECT_LE(rig.lights.size(), 32u) << name;
   }
+}
+
+// ---- Supersampling: a camera pixel integrates over its area, the truth is the area average. ----
+
+constexpr int kAreaCamera = 64;       // camera pixels a side
+constexpr int kAreaScene = 48;        // output-grid pixels a side (kAreaCamera - kAreaScene even)
+constexpr int kAreaFactor = 3;        // fine scene and rays per pixel axis
+constexpr double kAreaPeriodPx = 6.0;  // albedo sinusoid period in output pixels
+constexpr float kAreaMean = 0.5f, kAreaAmplitude = 0.2f;
+
+// A flat diffuse sample (specular 0) whose albedo is kAreaMean + kAreaAmplitude (sin(k x) + sin(k y))
+// / 2, sampled on the grid of `options` (pattern position origin + col pitch, origin - row pitch).
+SceneTruth SinusoidAlbedoScene(const SceneOptions& options, double coarse_pitch_mm) {
+  SceneTruth s = FlatScene(options.width, options.height, options.pitch_mm, kAreaMean);
+  const double k = 2.0 * kPi / (kAreaPeriodPx * coarse_pitch_mm);
+  for (int r = 0; r < options.height; ++r) {
+    for (int c = 0; c < options.width; ++c) {
+      const double x = options.origin_x_mm + c * options.pitch_mm, y = options.origin_y_mm - r * options.pitch_mm;
+      const double a = kAreaMean + 0.5 * kAreaAmplitude * (std::sin(k * x) + std::sin(k * y));
+      for (int ch = 0; ch < 3; ++ch) s.base_color.at(ch, r, c) = static_cast<float>(a);
+    }
+  }
+  return s;
+}
+
+// The distant rig's top camera without lens distortion, with square pixels, its principal point `offset_px` off the
+// centre: 0 puts every camera pixel exactly on an output-grid pixel, 0.5 half-way between four.
+Rig AreaTestRig(double offset_px) {
+  RigOptions options;
+  options.width = options.height = kAreaCamera;
+  Rig rig = MakeRig("distant", options);
+  RigCamera& cam = rig.cameras[0];
+  cam.distortion.fill(0.0);
+  cam.fy = cam.fx;  // square pixels on the plane (the rig jitters fy by 0.1 %)
+  cam.cx = 0.5 * (kAreaCamera - 1) + offset_px;
+  cam.cy = 0.5 * (kAreaCamera - 1) + offset_px;
+  return rig;
+}
+
+// Render of `scene` under light 0 divided by the render of a white flat scene on the same grid:
+// the effective albedo each camera pixel sees (light, view, vignetting and cosine cancel).
+Image SeenAlbedo(const SceneTruth& scene, const Rig& rig, int supersample) {
+  RenderOptions options;
+  options.supersample = supersample;
+  SceneTruth white = FlatScene(scene.height_mm.width(), scene.height_mm.height(), scene.pitch_mm, 1.0f);
+  SceneRenderer a(scene, rig, options), b(white, rig, options);
+  a.SetCamera(0);
+  b.SetCamera(0);
+  Image img = a.RenderLight(0);
+  const Image ref = b.RenderLight(0);
+  for (std::size_t i = 0; i < img.data().size(); ++i) img.data()[i] /= ref.data()[i];
+  return img;
+}
+
+// Standard deviation of channel 0 over the centred n x n crop.
+double CentreStd(const Image& image, int n) {
+  const int c0 = (image.width() - n) / 2, r0 = (image.height() - n) / 2;
+  double s = 0, s2 = 0;
+  for (int r = r0; r < r0 + n; ++r)
+    for (int c = c0; c < c0 + n; ++c) s += image.at(0, r, c), s2 += image.at(0, r, c) * image.at(0, r, c);
+  const double m = s / (n * n);
+  return std::sqrt(std::max(0.0, s2 / (n * n) - m * m));
+}
+
+SceneOptions AreaGrid(double pitch_mm) {
+  SceneOptions o;
+  o.width = o.height = kAreaScene;
+  o.pitch_mm = pitch_mm;
+  return o;
+}
+
+// With camera pixels exactly on the output grid, the supersampled render of the fine scene is the
+// render of its area-average truth: what the sensor integrates is what the truth holds.
+TEST(RendererAreaTest, AlignedCameraSeesTheAreaAverageTruth) {
+  // Both sides are linear in the albedo; only float rounding of ray hits and sums differs.
+  constexpr double kAlignedTolerance = 2e-5;
+  const Rig rig = AreaTestRig(0.0);
+  const SceneOptions grid = AreaGrid(rig.ground_pitch_mm);
+  const SceneTruth fine = SinusoidAlbedoScene(OversampledSceneOptions(grid, kAreaFactor), grid.pitch_mm);
+  const SceneTruth truth = AreaAverageScene(fine, kAreaFactor);
+  const Image seen = SeenAlbedo(fine, rig, kAreaFactor);
+  const int offset = (kAreaCamera - kAreaScene) / 2;
+  double max_error = 0, truth_range = 0;
+  for (int r = 1; r + 1 < kAreaScene; ++r) {
+    for (int c = 1; c + 1 < kAreaScene; ++c) {
+      const double expected = truth.base_color.at(0, r, c);
+      max_error = std::max(max_error, std::abs(seen.at(0, r + offset, c + offset) - expected));
+      truth_range = std::max(truth_range, std::abs(expected - kAreaMean));
+    }
+  }
+  EXPECT_LT(max_error, kAlignedTolerance);
+  EXPECT_GT(truth_range, 0.5 * kAreaAmplitude);  // the pattern is there to be seen
+}
+
+// Half a pixel off the grid, the camera sees other pixel footprints than the truth holds, but a
+// box filter keeps a smooth pattern's contrast whatever its phase. One ray per pixel on the
+// point-sampled grid (the renderer before supersampling) interpolates bilinearly half-way between
+// samples and loses a sixth of it at this period.
+TEST(RendererAreaTest, OffGridCameraKeepsTheContrastOfTheTruth) {
+  // Left: the fine scene's bilinear steps (a third of a pixel) and the 3-point midpoint rule, ~1.5 %.
+  constexpr double kContrastTolerance = 0.025;
+  // The single-ray render: cos(pi / 6) = 0.87 per axis for a half-pixel bilinear shift.
+  constexpr double kBlurredBelow = 0.92;
+  constexpr int kCrop = 36;  // six whole periods: the std does not depend on the phase
+  const Rig rig = AreaTestRig(0.5);
+  const SceneOptions grid = AreaGrid(rig.ground_pitch_mm);
+  const SceneTruth fine = SinusoidAlbedoScene(OversampledSceneOptions(grid, kAreaFactor), grid.pitch_mm);
+  const SceneTruth truth = AreaAverageScene(fine, kAreaFactor);
+  const double truth_std = CentreStd(truth.base_color, kCrop);
+  const double ratio = CentreStd(SeenAlbedo(fine, rig, kAreaFactor), kCrop) / truth_std;
+  EXPECT_NEAR(ratio, 1.0, kContrastTolerance);
+  const SceneTruth point = SinusoidAlbedoScene(grid, grid.pitch_mm);
+  const double point_ratio = CentreStd(SeenAlbedo(point, rig, 1), kCrop) / CentreStd(point.base_color, kCrop);
+  EXPECT_LT(point_ratio, kBlurredBelow);
+}
+
+TEST(RendererAreaTest, SupersampledRenderIsIndependentOfTheThreadCount) {
+  RigOptions options;
+  options.width = options.height = 32;
+  const Rig rig = MakeRig("near", options);
+  SceneOptions grid = AreaGrid(rig.ground_pitch_mm);
+  grid.width = grid.height = 24;
+  const SceneTruth scene = MakeScene("twill", OversampledSceneOptions(grid, 2));
+  RenderOptions render;
+  render.supersample = 2;
+  const int threads = GetThreadCount();
+  auto run = [&](int n) {
+    SetThreadCount(n);
+    SceneRenderer r(scene, rig, render);
+    r.SetCamera(0);
+    return r.RenderLight(3);
+  };
+  const Image one = run(1), many = run(4);
+  SetThreadCount(threads);
+  EXPECT_EQ(one.data(), many.data());
 }
 
 }  // namespace

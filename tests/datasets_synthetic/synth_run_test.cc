@@ -7,6 +7,7 @@
 
 #include "capture/manifest.h"
 #include "core/error.h"
+#include "datasets_synthetic/truth_writer.h"
 
 namespace u3mscan::synthetic {
 namespace {
@@ -33,6 +34,30 @@ TEST(SynthRunTest, BadOptionsNameTheOption) {
   EXPECT_THROW(options.Check(), InputError);
   options.dpi = 300;
   EXPECT_NO_THROW(options.Check());
+  for (int bad : {-1, kMaxSupersample + 1}) {
+    options.supersample = bad;
+    try {
+      options.Check();
+      FAIL() << "accepted supersample " << bad;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "--supersample");
+    }
+  }
+}
+
+TEST(SynthRunTest, AutoSupersampleAndSceneOversampleKeepMemoryBounded) {
+  EXPECT_EQ(AutoSupersample(256, 256), 3);
+  EXPECT_EQ(AutoSupersample(1000, 1000), 3);
+  EXPECT_EQ(AutoSupersample(4000, 3000), 2);
+  EXPECT_EQ(AutoSupersample(7360, 4912), 1);
+  EXPECT_EQ(SceneOversample(3, 192, 192), 3);
+  // A 7360x4912 camera's scene grid (kSampleFillOfView): over the budget even 2x finer.
+  EXPECT_EQ(SceneOversample(3, 5520, 3684), 1);
+  EXPECT_EQ(SceneOversample(0, 10, 10), 1);
+  for (int side : {1000, 2000, 3000}) {
+    const int f = SceneOversample(3, side, side);
+    EXPECT_LE(18.0 * sizeof(float) * side * side * f * f, kMaxFineSceneBytes + (f == 1 ? 1e12 : 0.0)) << side;
+  }
 }
 
 // A real scene preset end to end at the tiny size: the capture reads back and covers the scene.
@@ -51,6 +76,19 @@ TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
   const double width_mm = (*m.output.region_mm)[2] - (*m.output.region_mm)[0];
   EXPECT_NEAR(width_mm, 48 * 25.4 / 300.0, 1e-9);
   EXPECT_TRUE(fs::exists(dir / kTruthSubdir / kTruthFileName));
+  // The output grid is the truth's 300 dpi, not the 3x finer grid the frames were rendered from.
+  ASSERT_TRUE(m.output.dpi.has_value());
+  EXPECT_NEAR(*m.output.dpi, 300.0, 1e-9);
+  // The truth is the area average of the 3x finer scene (auto supersample at 64x64 is 3).
+  const SceneTruth truth = ReadTruth(dir / kTruthSubdir);
+  SceneOptions grid;
+  grid.width = grid.height = 48;
+  grid.pitch_mm = 25.4 / 300.0;
+  grid.seed = options.seed;
+  const SceneTruth expected = AreaAverageScene(MakeScene("twill", OversampledSceneOptions(grid, 3)), 3);
+  EXPECT_NEAR(truth.pitch_mm, grid.pitch_mm, 1e-12);
+  EXPECT_EQ(truth.height_mm.data(), expected.height_mm.data());
+  EXPECT_EQ(truth.normal.data(), expected.normal.data());
   fs::remove_all(dir);
 }
 

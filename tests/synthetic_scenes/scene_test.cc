@@ -171,6 +171,56 @@ TEST_P(EveryScene, TwiceTheDpiSamplesTheSamePhysicalPattern) {
   }
 }
 
+// A 3x finer grid from OversampledSceneOptions tiles each coarse pixel with 3 x 3 fine pixels;
+// the middle one is centred on the coarse pixel's point sample.
+TEST_P(EveryScene, OversampledGridTilesTheCoarsePixels) {
+  constexpr int kCoarse = 16, kFactor = 3;
+  const SceneOptions coarse_options = Options(5, kCoarse, kPitchMm);
+  const SceneTruth coarse = MakeScene(GetParam(), coarse_options);
+  const SceneTruth fine = MakeScene(GetParam(), OversampledSceneOptions(coarse_options, kFactor));
+  ASSERT_EQ(fine.height_mm.width(), kFactor * kCoarse);
+  ASSERT_DOUBLE_EQ(fine.pitch_mm * kFactor, kPitchMm);
+  // From 1: x = 0 and y = 0 are thread boundaries of the weaves, where the fine grid's -p/3 + p/3
+  // (1e-18 mm off zero) rightly picks the other thread.
+  for (int r = 1; r < kCoarse; ++r) {
+    for (int c = 1; c < kCoarse; ++c) {
+      const int fr = kFactor * r + 1, fc = kFactor * c + 1;
+      ASSERT_NEAR(fine.height_mm.at(0, fr, fc), coarse.height_mm.at(0, r, c), kSameSampleTolerance) << r << "," << c;
+      ASSERT_EQ(fine.alpha.at(0, fr, fc), coarse.alpha.at(0, r, c));
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_NEAR(fine.base_color.at(k, fr, fc), coarse.base_color.at(k, r, c), kSameSampleTolerance) << r << "," << c;
+      }
+    }
+  }
+}
+
+TEST_P(EveryScene, AreaAverageHasUnitNormalsAndTangentsAndKeepsTheMeans) {
+  constexpr int kCoarse = 12, kFactor = 3;
+  // Means of float maps summed in double in a different order.
+  constexpr double kMeanTolerance = 1e-5;
+  const SceneOptions coarse_options = Options(5, kCoarse, kPitchMm);
+  const SceneTruth fine = MakeScene(GetParam(), OversampledSceneOptions(coarse_options, kFactor));
+  const SceneTruth t = AreaAverageScene(fine, kFactor);
+  ASSERT_EQ(t.height_mm.width(), kCoarse);
+  EXPECT_DOUBLE_EQ(t.pitch_mm, kPitchMm);
+  for (int r = 0; r < kCoarse; ++r) {
+    for (int c = 0; c < kCoarse; ++c) {
+      double nn = 0, tt = 0, nt = 0;
+      for (int k = 0; k < 3; ++k) {
+        nn += t.normal.at(k, r, c) * t.normal.at(k, r, c);
+        tt += t.tangent.at(k, r, c) * t.tangent.at(k, r, c);
+        nt += t.normal.at(k, r, c) * t.tangent.at(k, r, c);
+      }
+      ASSERT_NEAR(nn, 1.0, kUnitLengthTolerance);
+      ASSERT_NEAR(tt, 1.0, kUnitLengthTolerance);
+      ASSERT_NEAR(nt, 0.0, kUnitLengthTolerance);
+    }
+  }
+  EXPECT_NEAR(t.height_mm.ChannelMean(0), fine.height_mm.ChannelMean(0), kMeanTolerance);
+  EXPECT_NEAR(t.alpha.ChannelMean(0), fine.alpha.ChannelMean(0), kMeanTolerance);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(t.base_color.ChannelMean(k), fine.base_color.ChannelMean(k), kMeanTolerance);
+}
+
 TEST_P(EveryScene, TinyAndNonSquareGridsWork) {
   // Border normals come from the model beyond the grid, so even a single pixel has one.
   for (const auto& [w, h] : {std::pair{1, 1}, std::pair{3, 2}, std::pair{17, 5}}) {
@@ -324,6 +374,51 @@ TEST(AnalyticScenesTest, SphereCapNormalsMatchTheClosedFormAwayFromTheRim) {
     }
   }
   EXPECT_GT(compared, kSize * kSize * 3 / 4);
+}
+
+// The truth of a smooth closed-form surface is its integral over each pixel, not its value at the
+// centre: h = A (1 + cos kx cos ky) averages to A (1 + s^2 cos kx cos ky), s = sin(kp/2) / (kp/2).
+TEST(AreaAverageTest, BumpsTruthIsTheIntegralOverEachPixel) {
+  constexpr int kCoarse = 32, kFactor = 3;
+  // The 3-point midpoint rule vs the integral: A k^2 p^2 (1/4 - 1/27... ) ~ 5e-5 mm at 300 dpi;
+  // the point sample differs from the integral by up to A (1 - s^2) ~ 9e-4 mm.
+  constexpr double kQuadratureToleranceMm = 2e-4;
+  const SceneOptions coarse_options = Options(1, kCoarse, kPitchMm);
+  const SceneTruth truth = AreaAverageScene(MakeScene("bumps", OversampledSceneOptions(coarse_options, kFactor)), kFactor);
+  const double k = 2.0 * std::acos(-1.0) / kBumpsPeriodMm, half = 0.5 * k * kPitchMm;
+  const double s = std::sin(half) / half;
+  double worst = 0.0, point_worst = 0.0;
+  for (int r = 0; r < kCoarse; ++r) {
+    for (int c = 0; c < kCoarse; ++c) {
+      const double x = PixelXMm(c, kPitchMm), y = PixelYMm(r, kPitchMm);
+      const double integral = kBumpsAmplitudeMm * (1.0 + s * s * std::cos(k * x) * std::cos(k * y));
+      worst = std::max(worst, std::abs(truth.height_mm.at(0, r, c) - integral));
+      point_worst = std::max(point_worst, std::abs(BumpsHeightMm(x, y) - integral));
+    }
+  }
+  EXPECT_LT(worst, kQuadratureToleranceMm);
+  EXPECT_GT(point_worst, 2 * kQuadratureToleranceMm);  // the test tells the two apart
+}
+
+TEST(AreaAverageTest, HolesBecomePartialCoverage) {
+  constexpr int kFactor = 3;
+  const SceneOptions coarse_options = Options(2, 24, kPitchMm);
+  const SceneTruth t = AreaAverageScene(MakeScene("holes", OversampledSceneOptions(coarse_options, kFactor)), kFactor);
+  int partial = 0;
+  for (float a : t.alpha.plane(0)) {
+    ASSERT_GE(a, 0.0f);
+    ASSERT_LE(a, 1.0f);
+    partial += a > 0.0f && a < 1.0f;
+  }
+  EXPECT_GT(partial, 24);  // every yarn edge crosses pixels
+}
+
+TEST(AreaAverageTest, RejectsGridsThatAreNotWholeBlocks) {
+  const SceneTruth fine = MakeScene("plain", Options(1, 10, kPitchMm));
+  EXPECT_THROW(AreaAverageScene(fine, 3), std::invalid_argument);
+  EXPECT_THROW(AreaAverageScene(fine, 0), std::invalid_argument);
+  EXPECT_THROW(OversampledSceneOptions(Options(), 0), std::invalid_argument);
+  EXPECT_EQ(AreaAverageScene(fine, 1).height_mm.data(), fine.height_mm.data());
 }
 
 }  // namespace
