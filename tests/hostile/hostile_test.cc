@@ -48,10 +48,6 @@ std::string CaseName(const ::testing::TestParamInfo<Case>& info) { return FileTe
 
 std::string DeepArray(int depth) { return std::string(depth, '[') + std::string(depth, ']'); }
 
-// Bugs this suite found that are not fixed yet (the parsers belong to other modules): the case is
-// skipped with the reason, so the suite stays green and the skip shows in every run. Remove the
-// entry with the fix.
-// The reason, or "" when `file` has no known bug.
 // ------------------------------------------------------------------------------- U3M files
 
 const std::vector<Case>& BadU3mCases() {
@@ -113,7 +109,7 @@ const std::vector<Case>& BadTextureCases() {
       {"corrupt_data.png", "textures/basecolor.png"},
       {"text.png", "textures/basecolor.png"},
       {"enormous_dimensions.png", "textures/basecolor.png"},  // 65536 x 65536 in a 100-byte file
-      {"large_dimensions.png", "textures/basecolor.png"},     // 36000 x 36000: under the 2^32-sample cap
+      {"large_dimensions.png", "textures/basecolor.png"},     // 36000 x 36000: over the 2^30-sample cap
   };
   return cases;
 }
