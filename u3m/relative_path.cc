@@ -105,6 +105,9 @@ std::string SanitizeRelativePath(std::string_view path) {
   std::string out;
   for (std::string segment : Split(path, true)) {
     if (segment.empty() || segment == "." || segment == "..") continue;
+    if (!IsValidUtf8(segment))  // e.g. a Latin-1 file name: keep its ASCII, mark the rest
+      for (char& c : segment)
+        if (static_cast<unsigned char>(c) >= 0x80) c = '_';
     for (char& c : segment) {
       const unsigned char u = static_cast<unsigned char>(c);
       if (u < 0x20 || u == 0x7F || std::string_view("<>:\"|$%").find(c) != std::string_view::npos) c = '_';

@@ -48,7 +48,8 @@ bool IsWritableRelativePath(std::string_view path, std::string* why = nullptr);
 std::string RelativePathProblem(std::string_view name);
 
 // A writable path as close to `path` as possible: unsafe segments dropped, forbidden characters
-// replaced by '_', trailing dots and spaces removed, reserved names prefixed with '_'.
+// (and the non-ASCII bytes of a segment that is not UTF-8) replaced by '_', trailing dots and
+// spaces removed, reserved names prefixed with '_'.
 std::string SanitizeRelativePath(std::string_view path);
 
 // Well-formed UTF-8: no overlong forms, surrogates or code points past U+10FFFF.

@@ -110,13 +110,15 @@ TEST(RelativePath, SpellingSlipsAreRepairedInAU3mAndRefusedAsArchiveNames) {
 
 TEST(RelativePath, SanitizedNamesAreAlwaysWritable) {
   for (const char* name : {"a.png.", "a.png ", "CON.png", "x/../y.png", "a\\b.png", "f%/a$b.png", "<>:\"|", "~", ".",
-                           "/abs/p.png", "C:/w.png", "t/\xC3\xA9.png"}) {
+                           "/abs/p.png", "C:/w.png", "t/\xC3\xA9.png", "caf\xE9.png"}) {
     const std::string sanitized = SanitizeRelativePath(name);
     std::string why;
     EXPECT_TRUE(IsWritableRelativePath(sanitized, &why)) << name << " -> " << sanitized << ": " << why;
   }
   EXPECT_EQ(SanitizeRelativePath("textures/CON.png"), "textures/_CON.png");
   EXPECT_EQ(SanitizeRelativePath("a\\b.png"), "a/b.png");
+  EXPECT_EQ(SanitizeRelativePath("caf\xE9.png"), "caf_.png");  // Latin-1, not UTF-8
+  EXPECT_EQ(SanitizeRelativePath("t/\xC3\xA9.png"), "t/\xC3\xA9.png");
 }
 
 TEST(TextureStats, BlendModesFollowTheSpecification) {
