@@ -141,10 +141,10 @@ std::string Printable(std::string_view raw) {
   return "\"" + out + "\"";
 }
 
+static_assert(kMaxRelativePathBytes <= 0xFFFF, "a ZIP name length is 16 bits: every checked name fits");
+
 // An entry name by the project's one path rule (u3m/relative_path.h), in its exact spelling: what
 // lands on disk is the name as written, so slips a U3M reader would repair are refused here.
-static_assert(kMaxRelativePathBytes <= 0xFFFF, "a ZIP name length is 16 bits");
-
 struct NameCheck {
   std::string error;    // could escape or confuse the output (expected ...): refuse
   std::string warning;  // breaks the conventions or the 1.1 pattern (what it has): refuse on write, warn on read
