@@ -90,41 +90,6 @@ std::string Hex(std::uint32_t v) {
 
 // --- Names ------------------------------------------------------------------------------------
 
-bool ValidUtf8(std::string_view s) {
-  std::size_t i = 0;
-  while (i < s.size()) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    int extra = 0;
-    std::uint32_t cp = 0;
-    if (c < 0x80) {
-      ++i;
-      continue;
-    } else if ((c & 0xE0) == 0xC0) {
-      extra = 1;
-      cp = c & 0x1F;
-    } else if ((c & 0xF0) == 0xE0) {
-      extra = 2;
-      cp = c & 0x0F;
-    } else if ((c & 0xF8) == 0xF0) {
-      extra = 3;
-      cp = c & 0x07;
-    } else {
-      return false;
-    }
-    if (i + extra >= s.size()) return false;  // truncated sequence
-    for (int k = 1; k <= extra; ++k) {
-      const auto cc = static_cast<unsigned char>(s[i + k]);
-      if ((cc & 0xC0) != 0x80) return false;
-      cp = (cp << 6) | (cc & 0x3F);
-    }
-    // Overlong forms, UTF-16 surrogates and code points past U+10FFFF are not UTF-8.
-    static constexpr std::uint32_t kMinForLength[4] = {0, 0x80, 0x800, 0x10000};
-    if (cp < kMinForLength[extra] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
-    i += static_cast<std::size_t>(extra) + 1;
-  }
-  return true;
-}
-
 void AppendUtf8(std::string& out, std::uint32_t cp) {
   if (cp < 0x80) {
     out.push_back(static_cast<char>(cp));
@@ -176,58 +141,19 @@ std::string Printable(std::string_view raw) {
   return "\"" + out + "\"";
 }
 
+static_assert(kMaxRelativePathBytes <= 0xFFFF, "a ZIP name length is 16 bits: every checked name fits");
+
+// An entry name by the project's one path rule (u3m/relative_path.h), in its exact spelling: what
+// lands on disk is the name as written, so slips a U3M reader would repair are refused here.
 struct NameCheck {
-  std::string error;    // the name could escape or confuse the output: refuse
-  std::string warning;  // legal but unsafe on some systems: refuse on write, warn on read
+  std::string error;    // could escape or confuse the output (expected ...): refuse
+  std::string warning;  // breaks the conventions or the 1.1 pattern (what it has): refuse on write, warn on read
 };
 
 NameCheck CheckName(std::string_view name) {
-  NameCheck check;
-  if (name.empty()) {
-    check.error = "a non-empty name";
-    return check;
-  }
-  if (!ValidUtf8(name)) {
-    check.error = "a name in valid UTF-8";
-    return check;
-  }
-  for (char ch : name) {
-    const auto c = static_cast<unsigned char>(ch);
-    if (c < 0x20 || c == 0x7F) {
-      check.error = "a name without control characters";
-      return check;
-    }
-    if (ch == '\\') {
-      check.error = "'/' as the only separator, no backslash";
-      return check;
-    }
-    if (ch == ':') {
-      check.error = "a relative name without ':' (drive letter or stream name)";
-      return check;
-    }
-  }
-  if (name.front() == '/') {
-    check.error = "a relative name, not an absolute one";
-    return check;
-  }
-  std::size_t begin = 0;
-  while (begin <= name.size()) {
-    const std::size_t end = std::min(name.find('/', begin), name.size());
-    const std::string_view segment = name.substr(begin, end - begin);
-    if (segment.empty()) {
-      check.error = "a name without empty segments ('//' or a trailing '/')";
-      return check;
-    }
-    if (segment == "." || segment == "..") {
-      check.error = "a name without '.' or '..' segments";
-      return check;
-    }
-    if (check.warning.empty() && (segment.back() == '.' || segment.back() == ' ')) {
-      check.warning = "no segment ending in '.' or ' ' (Windows drops them)";
-    }
-    begin = end + 1;
-  }
-  return check;
+  const RelativePathCheck check = CheckRelativePath(name, PathSpelling::kExact);
+  if (check.unsafe) return {check.unsafe_reason, ""};
+  return {"", check.problems.empty() ? "" : check.problems.front()};
 }
 
 std::string FoldAscii(std::string_view s) {
@@ -509,12 +435,12 @@ class ArchiveParser {
     const std::string label = "central directory entry #" + std::to_string(e.index + 1);
     if (raw.find('\0') != std::string::npos) Fail(label, "a name without NUL bytes, got " + Printable(raw));
     if (e.flags & kFlagUtf8) {
-      if (!ValidUtf8(raw)) Fail(label, "a valid UTF-8 name (the UTF-8 flag is set), got " + Printable(raw));
+      if (!IsValidUtf8(raw)) Fail(label, "a valid UTF-8 name (the UTF-8 flag is set), got " + Printable(raw));
       return raw;
     }
     const bool ascii = std::all_of(raw.begin(), raw.end(), [](char c) { return static_cast<unsigned char>(c) < 0x80; });
     if (ascii) return raw;
-    if (ValidUtf8(raw)) {
+    if (IsValidUtf8(raw)) {
       Warn("has non-ASCII names without the UTF-8 flag; taken as UTF-8", "entry " + Printable(raw));
       return raw;
     }
@@ -566,7 +492,7 @@ class ArchiveParser {
       if (e.folder) checked.remove_suffix(1);
       const NameCheck check = CheckName(checked);
       if (!check.error.empty()) Fail(label, check.error);
-      if (!check.warning.empty()) Warn("has names that are unsafe on Windows: " + check.warning, label);
+      if (!check.warning.empty()) Warn("has names the conventions advise against: " + check.warning, label);
       if (!names.insert(e.name).second) Fail(label, "a unique name; it appears twice");
       (e.folder ? folders : files).insert(std::string(checked));
       if (!e.folder) {
@@ -843,11 +769,6 @@ std::vector<std::uint8_t> ReadWholeFile(const fs::path& path, std::uint64_t max_
 
 }  // namespace
 
-std::string RelativePathProblem(std::string_view name) {
-  const NameCheck check = CheckName(name);
-  return check.error.empty() ? check.warning : check.error;
-}
-
 std::vector<ArchiveEntry> ParseArchive(std::span<const std::uint8_t> bytes, const std::string& archive_name,
                                        const ArchiveLimits& limits, std::vector<std::string>* warnings) {
   return ArchiveParser(bytes, archive_name, limits, warnings).Parse();
@@ -876,8 +797,7 @@ std::vector<std::uint8_t> SerializeArchive(const std::vector<ArchiveEntry>& entr
     const std::string label = "entry " + Printable(entry.name);
     const NameCheck check = CheckName(entry.name);
     if (!check.error.empty()) throw InputError(archive_name, label, check.error);
-    if (!check.warning.empty()) throw InputError(archive_name, label, check.warning);
-    if (entry.name.size() > 0xFFFF) throw InputError(archive_name, label, "a name of at most 65535 bytes");
+    if (!check.warning.empty()) throw InputError(archive_name, label, "a name the conventions allow, got " + check.warning);
     if (!names.insert(entry.name).second) throw InputError(archive_name, label, "a unique name; it appears twice");
     if (!folded.insert(FoldAscii(entry.name)).second) {
       throw InputError(archive_name, label, "a name unique also without regard to case");

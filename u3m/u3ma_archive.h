@@ -6,11 +6,12 @@
 // Written archives are byte-exact to the conventions: store or deflate, UTF-8 flag, no extra fields,
 // no comments, no zip64, no data descriptors, version-made-by 0x003F, version-needed 0x14, DOS times
 // in UTC, external attributes 0, unique relative names, nothing before the first entry or after the
-// end record. Reading refuses anything that could escape or exhaust the output: absolute or `..`
+// end record. Entry names follow the project's one path rule (u3m/relative_path.h, exact spelling).
+// Reading refuses anything that could escape or exhaust the output: absolute or `..`
 // names, backslashes, duplicate names, symlinks, encryption, sizes or CRCs that do not add up, and
 // archives that would unpack to more than ArchiveLimits allow. Harmless habits of other tools (extra
-// fields, data descriptors, other made-by versions, folder entries, an archive comment) are read
-// and reported as warnings.
+// fields, data descriptors, other made-by versions, folder entries, an archive comment, names that
+// break only the 1.1 path pattern) are read and reported as warnings.
 
 #include <cstdint>
 #include <ctime>
@@ -19,6 +20,8 @@
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "u3m/relative_path.h"  // entry names follow its rule; RelativePathProblem(name) says why one fails
 
 namespace u3mscan {
 
@@ -72,11 +75,5 @@ std::vector<std::uint8_t> SerializeArchive(const std::vector<ArchiveEntry>& entr
 std::vector<std::string> ExtractArchive(const std::filesystem::path& archive, const std::filesystem::path& out_dir,
                                         const ArchiveLimits& limits = {},
                                         std::vector<std::string>* warnings = nullptr);
-
-// Why `name` is not a safe relative path by the conventions (relative, '/' separators, no empty,
-// "." or ".." segments, no leading '/', no drive letter, no backslash, no control characters,
-// valid UTF-8, no segment ending in '.' or ' '), or "" when it is one. The same rule holds for
-// entry names and for the texture paths inside a U3M.
-std::string RelativePathProblem(std::string_view name);
 
 }  // namespace u3mscan

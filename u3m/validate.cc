@@ -71,64 +71,71 @@ class FileChecker {
     }
   }
 
+  // Colour maps are sRGB-encoded; data maps (scalars, normals) are linear (docs/u3m-conventions.md).
+  static PixelEncoding EncodingOf(const ScalarParam&) { return PixelEncoding::kLinear; }
+  static PixelEncoding EncodingOf(const ColorParam&) { return PixelEncoding::kSrgb; }
+  static PixelEncoding EncodingOf(const NormalParam&) { return PixelEncoding::kLinear; }
+
+  // Whether the constant can be compared with this texture; errors for what the image lacks.
+  bool Comparable(const ScalarParam&, const ImageReadInfo&, const std::string&) { return true; }
+  bool Comparable(const ColorParam&, const ImageReadInfo&, const std::string&) { return true; }
+  bool Comparable(const NormalParam& p, const ImageReadInfo& info, const std::string& path_pointer) {
+    if (info.channels < 3)
+      Error(path_pointer, "a normal map needs 3 channels, \"" + p.texture->image.path + "\" has " +
+                              std::to_string(info.channels));
+    // 1.0 has no constant normal vector: nothing to compare.
+    return loaded_.version != SchemaVersion::k1_0 && info.channels >= 3;
+  }
+
+  // The constant against the texture's mean final value (offset + average(channels) * factor, the
+  // colour after its blend mode, the normal after its scale).
+  void Constant(const ScalarParam& p, const Image& image, const std::string& pointer) {
+    const double mean = ScalarTextureMean(image, p.texture->factor, p.texture->offset);
+    if (!ConstantAgrees(p.constant, mean))
+      Error(pointer, "constant " + Fmt(p.constant) + " is not the texture's mean value " + Fmt(mean) +
+                         " (offset + average(channels) * factor); a reader without the texture gets it wrong");
+  }
+  void Constant(const ColorParam& p, const Image& image, const std::string& pointer) {
+    const Rgb3 mean = ColorTextureMean(image, p.texture->mode, p.texture->factor);
+    if (!ConstantAgrees(p.constant.r, mean.r) || !ConstantAgrees(p.constant.g, mean.g) ||
+        !ConstantAgrees(p.constant.b, mean.b))
+      Error(pointer, "constant (" + Fmt(p.constant.r) + ", " + Fmt(p.constant.g) + ", " + Fmt(p.constant.b) +
+                         ") is not the texture's mean linear colour (" + Fmt(mean.r) + ", " + Fmt(mean.g) + ", " +
+                         Fmt(mean.b) + ") after mode " + std::string(BlendModeName(p.texture->mode)));
+  }
+  void Constant(const NormalParam& p, const Image& image, const std::string& pointer) {
+    const Vec3 mean = NormalTextureMean(image, p.texture->scale);
+    const Vec3& c = p.constant;
+    if (std::abs(c.x - mean.x) > kNormalConstantTolerance || std::abs(c.y - mean.y) > kNormalConstantTolerance ||
+        std::abs(c.z - mean.z) > kNormalConstantTolerance)
+      Error(pointer, "constant (" + Fmt(c.x) + ", " + Fmt(c.y) + ", " + Fmt(c.z) + ") is not the texture's mean normal (" +
+                         Fmt(mean.x) + ", " + Fmt(mean.y) + ", " + Fmt(mean.z) + ")");
+  }
+
+  // Every textured parameter of one key table (ScalarKeys, ColorKeys or NormalKeys) on a side: the
+  // file exists and is an image, its pixel size agrees with its size and dpi, and (check_constants)
+  // the constant agrees with the texture's mean. The overloads above hold what differs by type.
+  template <class Key>
+  void Textures(const Visualization& side, const std::string& sp, const std::vector<Key>& keys) {
+    for (const Key& key : keys) {
+      const auto& p = side.*key.member;
+      if (!p.texture) continue;
+      const std::string kp = sp + "/" + std::string(key.name);
+      const std::string ip = kp + "/texture/image";
+      const TextureImage& i = p.texture->image;
+      ImageReadInfo info;
+      if (!Info(i.path, ip + "/path", info)) continue;
+      Geometry(info, i.width_mm, i.height_mm, i.dpi_x, i.dpi_y, ip);
+      const bool comparable = Comparable(p, info, ip + "/path");
+      if (!options_.check_constants || !comparable) continue;
+      if (auto image = Load(i.path, EncodingOf(p), ip + "/path")) Constant(p, *image, kp + "/constant");
+    }
+  }
+
   void Side(const Visualization& side, const std::string& sp) {
-    for (const ScalarKey& key : ScalarKeys()) {
-      const ScalarParam& p = side.*key.member;
-      if (!p.texture) continue;
-      const std::string ip = sp + "/" + std::string(key.name) + "/texture/image";
-      ImageReadInfo info;
-      if (!Info(p.texture->image.path, ip + "/path", info)) continue;
-      const TextureImage& i = p.texture->image;
-      Geometry(info, i.width_mm, i.height_mm, i.dpi_x, i.dpi_y, ip);
-      if (!options_.check_constants) continue;
-      if (auto image = Load(i.path, PixelEncoding::kLinear, ip + "/path")) {
-        const double mean = ScalarTextureMean(*image, p.texture->factor, p.texture->offset);
-        if (!ConstantAgrees(p.constant, mean))
-          Error(sp + "/" + std::string(key.name) + "/constant",
-                "constant " + Fmt(p.constant) + " is not the texture's mean value " + Fmt(mean) +
-                    " (offset + average(channels) * factor); a reader without the texture gets it wrong");
-      }
-    }
-    for (const ColorKey& key : ColorKeys()) {
-      const ColorParam& p = side.*key.member;
-      if (!p.texture) continue;
-      const std::string ip = sp + "/" + std::string(key.name) + "/texture/image";
-      ImageReadInfo info;
-      if (!Info(p.texture->image.path, ip + "/path", info)) continue;
-      const TextureImage& i = p.texture->image;
-      Geometry(info, i.width_mm, i.height_mm, i.dpi_x, i.dpi_y, ip);
-      if (!options_.check_constants) continue;
-      if (auto image = Load(i.path, PixelEncoding::kSrgb, ip + "/path")) {
-        const Rgb3 mean = ColorTextureMean(*image, p.texture->mode, p.texture->factor);
-        if (!ConstantAgrees(p.constant.r, mean.r) || !ConstantAgrees(p.constant.g, mean.g) ||
-            !ConstantAgrees(p.constant.b, mean.b))
-          Error(sp + "/" + std::string(key.name) + "/constant",
-                "constant (" + Fmt(p.constant.r) + ", " + Fmt(p.constant.g) + ", " + Fmt(p.constant.b) +
-                    ") is not the texture's mean linear colour (" + Fmt(mean.r) + ", " + Fmt(mean.g) + ", " +
-                    Fmt(mean.b) + ") after mode " + std::string(BlendModeName(p.texture->mode)));
-      }
-    }
-    for (const NormalKey& key : NormalKeys()) {
-      const NormalParam& p = side.*key.member;
-      if (!p.texture) continue;
-      const std::string ip = sp + "/" + std::string(key.name) + "/texture/image";
-      ImageReadInfo info;
-      if (!Info(p.texture->image.path, ip + "/path", info)) continue;
-      const TextureImage& i = p.texture->image;
-      Geometry(info, i.width_mm, i.height_mm, i.dpi_x, i.dpi_y, ip);
-      if (info.channels < 3) Error(ip + "/path", "a normal map needs 3 channels, \"" + i.path + "\" has " + std::to_string(info.channels));
-      // 1.0 has no constant normal vector: nothing to compare.
-      if (!options_.check_constants || loaded_.version == SchemaVersion::k1_0 || info.channels < 3) continue;
-      if (auto image = Load(i.path, PixelEncoding::kLinear, ip + "/path")) {
-        const Vec3 mean = NormalTextureMean(*image, p.texture->scale);
-        const Vec3& c = p.constant;
-        if (std::abs(c.x - mean.x) > kNormalConstantTolerance || std::abs(c.y - mean.y) > kNormalConstantTolerance ||
-            std::abs(c.z - mean.z) > kNormalConstantTolerance)
-          Error(sp + "/" + std::string(key.name) + "/constant",
-                "constant (" + Fmt(c.x) + ", " + Fmt(c.y) + ", " + Fmt(c.z) + ") is not the texture's mean normal (" +
-                    Fmt(mean.x) + ", " + Fmt(mean.y) + ", " + Fmt(mean.z) + ")");
-      }
-    }
+    Textures(side, sp, ScalarKeys());
+    Textures(side, sp, ColorKeys());
+    Textures(side, sp, NormalKeys());
     if (side.preview) {
       const PreviewImage& pv = *side.preview;
       ImageReadInfo info;

@@ -1,5 +1,5 @@
 // End-to-end accuracy of the fit (issue 6 targets) on a tiny noise-free synthetic capture: the
-// bump field of tests/pipeline/e2e_scene.h on the `distant` rig, written by the synthetic scanner,
+// bump field of tests/support/bump_scene.h on the `distant` rig, written by the synthetic scanner,
 // calibrated, rectified, reconstructed (photometric stereo) and fitted by the pipeline's stages.
 //
 // Regression test of the normal refinement in FitPrincipled (docs/fitting.md): with the
@@ -22,7 +22,7 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "pipeline/stages.h"
-#include "tests/pipeline/e2e_scene.h"
+#include "tests/support/bump_scene.h"
 
 namespace u3mscan {
 namespace {

@@ -9,7 +9,7 @@
 
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
-#include "e2e_scene.h"
+#include "tests/support/bump_scene.h"
 #include "pipeline/process.h"
 #include "u3m/validate.h"
 

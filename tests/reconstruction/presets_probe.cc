@@ -17,46 +17,10 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "pipeline/stages.h"
+#include "tests/support/bump_scene.h"
 
 using namespace u3mscan;
 namespace fs = std::filesystem;
-
-namespace {
-
-// Bumps z = a sin(kx) sin(ky) with uniform Principled parameters (roughness 0.6, specular 0.5).
-synthetic::SceneTruth BumpScene(int width, int height, double pitch_mm, double amplitude_mm, double period_mm) {
-  synthetic::SceneTruth scene;
-  scene.name = "bumps";
-  scene.pitch_mm = pitch_mm;
-  auto plane = [&](int channels, float value) { return Image(width, height, channels, value, pitch_mm); };
-  scene.height_mm = plane(1, 0.0f);
-  scene.normal = plane(3, 0.0f);
-  const double k = 2.0 * std::numbers::pi / period_mm;
-  for (int row = 0; row < height; ++row)
-    for (int col = 0; col < width; ++col) {
-      const double x = (col + 0.5) * pitch_mm, y = -(row + 0.5) * pitch_mm;  // rows grow with -y
-      scene.height_mm.at(0, row, col) = static_cast<float>(amplitude_mm * std::sin(k * x) * std::sin(k * y));
-      const Eigen::Vector3d n = Eigen::Vector3d(-amplitude_mm * k * std::cos(k * x) * std::sin(k * y),
-                                                -amplitude_mm * k * std::sin(k * x) * std::cos(k * y), 1.0)
-                                    .normalized();
-      for (int c = 0; c < 3; ++c) scene.normal.at(c, row, col) = static_cast<float>(n(c));
-    }
-  scene.base_color = plane(3, 0.0f);
-  const float base[3] = {0.6f, 0.4f, 0.3f};
-  for (int c = 0; c < 3; ++c)
-    for (float& v : scene.base_color.plane(c)) v = base[c];
-  scene.roughness = plane(1, 0.6f);
-  scene.specular = plane(1, 0.5f);
-  scene.specular_tint = plane(1, 0.0f);
-  scene.sheen = plane(1, 0.0f);
-  scene.sheen_tint = plane(1, 0.0f);
-  scene.metallic = plane(1, 0.0f);
-  scene.anisotropic = plane(1, 0.0f);
-  scene.alpha = plane(1, 1.0f);
-  return scene;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   SetLogLevel(LogLevel::kError);
@@ -65,7 +29,7 @@ int main(int argc, char** argv) {
   rig_options.width = 96;
   rig_options.height = 96;
   // Bumps of 0.05 mm over 1.5 mm (tilt up to 12 deg), Principled with roughness 0.6, specular 0.5.
-  const auto scene = BumpScene(80, 80, rig_options.pitch_mm, 0.05, 1.5);
+  const auto scene = testing::BumpScene(80, 80, rig_options.pitch_mm, 0.05, 1.5);
   for (const std::string& rig_name : synthetic::RigNames()) {
     if (argc > 1 && rig_name != argv[1]) continue;
     const fs::path dir = root / rig_name;

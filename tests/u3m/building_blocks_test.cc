@@ -66,15 +66,59 @@ TEST(RelativePath, RefusesEscapesRepairsSlipsAndFlagsSchemaProblems) {
     EXPECT_TRUE(IsWritableRelativePath(fine)) << fine;
 }
 
+// The rules on which the U3M reader and the .u3ma reader once differed, now one checker: the
+// stricter rule holds for both spellings, and only the spelling slips are read differently.
+TEST(RelativePath, UtfEightLengthAndSchemaRulesHoldForU3mPathsAndArchiveNames) {
+  const std::string at_limit = std::string(kMaxRelativePathBytes - 4, 'a') + ".png";
+  const std::string over_limit = "a" + at_limit;
+  for (PathSpelling spelling : {PathSpelling::kRepair, PathSpelling::kExact}) {
+    SCOPED_TRACE(spelling == PathSpelling::kRepair ? "repair" : "exact");
+    // Not UTF-8 (the archive's rule): a truncated sequence, an overlong '/', a surrogate.
+    for (const char* bad : {"t/\xC3.png", "t\xC0\xAFx.png", "t/\xED\xA0\x80.png"}) {
+      const RelativePathCheck check = CheckRelativePath(bad, spelling);
+      EXPECT_TRUE(check.unsafe) << bad;
+      EXPECT_NE(check.unsafe_reason.find("UTF-8"), std::string::npos) << check.unsafe_reason;
+    }
+    // At most kMaxRelativePathBytes (the U3M reader's rule).
+    EXPECT_FALSE(CheckRelativePath(at_limit, spelling).unsafe);
+    EXPECT_TRUE(CheckRelativePath(over_limit, spelling).unsafe);
+    // Names that break only the 1.1 pattern are flagged, not refused (the U3M reader's rule).
+    for (const char* flagged : {"textures/con.png", "textures/a.png.", "f%/a.png", "a|b.png", "~/a.png"}) {
+      const RelativePathCheck check = CheckRelativePath(flagged, spelling);
+      EXPECT_FALSE(check.unsafe) << flagged;
+      EXPECT_EQ(check.problems.size(), 1u) << flagged;
+    }
+  }
+  EXPECT_NE(RelativePathProblem("textures/COM1.png").find("reserved"), std::string::npos);
+  EXPECT_NE(RelativePathProblem("f%/a.png").find("pattern"), std::string::npos);
+}
+
+TEST(RelativePath, SpellingSlipsAreRepairedInAU3mAndRefusedAsArchiveNames) {
+  for (const char* slip : {"a\\b.png", "./a.png", "a//b.png", "a/./b.png", "a/b.png/"}) {
+    const RelativePathCheck repaired = CheckRelativePath(slip, PathSpelling::kRepair);
+    EXPECT_FALSE(repaired.unsafe) << slip;
+    EXPECT_FALSE(repaired.repairs.empty()) << slip;
+    EXPECT_TRUE(CheckRelativePath(slip, PathSpelling::kExact).unsafe) << slip;
+    EXPECT_FALSE(IsWritableRelativePath(slip)) << slip;
+  }
+  // Escapes are unsafe in both, also when only a backslash makes the '..' a segment.
+  for (const char* escape : {"..\\x.png", "a\\..\\..\\x.png", "\\x.png"}) {
+    EXPECT_TRUE(CheckRelativePath(escape, PathSpelling::kRepair).unsafe) << escape;
+    EXPECT_TRUE(CheckRelativePath(escape, PathSpelling::kExact).unsafe) << escape;
+  }
+}
+
 TEST(RelativePath, SanitizedNamesAreAlwaysWritable) {
   for (const char* name : {"a.png.", "a.png ", "CON.png", "x/../y.png", "a\\b.png", "f%/a$b.png", "<>:\"|", "~", ".",
-                           "/abs/p.png", "C:/w.png", "t/\xC3\xA9.png"}) {
+                           "/abs/p.png", "C:/w.png", "t/\xC3\xA9.png", "caf\xE9.png"}) {
     const std::string sanitized = SanitizeRelativePath(name);
     std::string why;
     EXPECT_TRUE(IsWritableRelativePath(sanitized, &why)) << name << " -> " << sanitized << ": " << why;
   }
   EXPECT_EQ(SanitizeRelativePath("textures/CON.png"), "textures/_CON.png");
   EXPECT_EQ(SanitizeRelativePath("a\\b.png"), "a/b.png");
+  EXPECT_EQ(SanitizeRelativePath("caf\xE9.png"), "caf_.png");  // Latin-1, not UTF-8
+  EXPECT_EQ(SanitizeRelativePath("t/\xC3\xA9.png"), "t/\xC3\xA9.png");
 }
 
 TEST(TextureStats, BlendModesFollowTheSpecification) {

@@ -128,6 +128,21 @@ TEST(ArchiveRead, ToleratesExtraFieldsDescriptorsUnixAttributesAndCp437) {
   }
 }
 
+// Entry names follow the same path rule as a U3M's texture paths (u3m/relative_path.h): names that
+// break only the 1.1 pattern are read with a warning, over-long names are refused.
+TEST(ArchiveRead, NamesBreakingOnlyThePatternAreReadWithAWarning) {
+  std::vector<std::string> warnings;
+  const auto entries = ParseArchive(BuildEntries({Entry("textures/con.png", "x"), Entry("f%/a.png", "y")}),
+                                    "pattern.u3ma", {}, &warnings);
+  ASSERT_EQ(entries.size(), 2u);
+  std::string all;
+  for (const auto& w : warnings) all += w + "\n";
+  EXPECT_NE(all.find("reserved device name"), std::string::npos) << all;
+  EXPECT_NE(all.find("relative_file_path pattern"), std::string::npos) << all;
+  ExpectRefused(BuildEntries({Entry(std::string(kMaxRelativePathBytes + 1, 'a'), "x")}), "entry",
+                "at most " + std::to_string(kMaxRelativePathBytes) + " bytes");
+}
+
 TEST(ArchiveRead, RefusesEscapingNames) {
   ExpectRefused(BuildEntries({Entry("../evil.txt", "x")}), "../evil.txt", "'..'");
   ExpectRefused(BuildEntries({Entry("textures/../../evil.txt", "x")}), "evil", "'..'");

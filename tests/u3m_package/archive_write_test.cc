@@ -177,7 +177,10 @@ TEST(ArchiveWrite, BadNamesAreRefusedAndNothingIsWritten) {
   const fs::path path = dir.path() / "bad.u3ma";
   const std::vector<std::string> bad = {"../up.png", "/abs.png", "a\\b.png", "C:/x.png", "a//b.png", "./a.png",
                                         "a/./b.png", "trailing.", "dir /x.png", "", "x/", "ctl\x01.png",
-                                        std::string("bad\xff.png")};
+                                        std::string("bad\xff.png"),
+                                        // the 1.1 pattern and the length limit, as for a U3M's paths
+                                        "textures/CON.png", "f%/a.png", "a|b.png",
+                                        std::string(kMaxRelativePathBytes + 1, 'a')};
   for (const std::string& name : bad) {
     SCOPED_TRACE(name);
     try {
