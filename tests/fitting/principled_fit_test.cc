@@ -615,7 +615,7 @@ TEST_F(PrincipledFitTest, DISABLED_Throughput) {
   spec.material = [&](int col, int row) { return TwoFabrics(col / 8, row / 8, spec.width / 8, false); };
   const Scene scene = MakeScene(spec);
   FitOptions options;
-  if (std::getenv("U3MSCAN_FIT_NO_REFINE") != nullptr) options.refine_per_pixel = false;
+  if (std::getenv("U3MSCAN_FIT_NO_REFINE") != nullptr) options.mode = FitMode::kClusters;
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
   const double megapixels = spec.width * spec.height / 1e6;
   std::cout << "pixels " << spec.width * spec.height << ", observations " << scene.stack.observations.size()
