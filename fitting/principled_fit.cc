@@ -1225,6 +1225,16 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
                     100.0 * static_cast<double>(flagged_pixels) / static_cast<double>(measuring_pixels), worst_flagged);
       report.reliable = false;
       report.unreliable_reason = buffer + result.clusters[worst_flagged].parameters[i].unreliable_reason + ")";
+    } else if (n > 0 && static_cast<double>(measuring_pixels) <
+                            (1.0 - options.unreliable_pixel_share) * static_cast<double>(n)) {
+      // Measured where it is, but most pixels hold the U3M default: the map as a whole is a guess.
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "measured only in clusters holding %.0f %% of the fitted pixels; the others hold the U3M default "
+                    "%.3g",
+                    100.0 * static_cast<double>(measuring_pixels) / static_cast<double>(n), FitParameterDefault(p));
+      report.reliable = false;
+      report.unreliable_reason = buffer;
     }
     // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
     const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;

@@ -91,7 +91,8 @@ struct FitOptions {
   //     `highlight_lobe_fraction` of the signal (highlights fell between the lights or saturated: the
   //     value is inferred from their absence).
   // A map is flagged when the clusters that flag it hold more than `unreliable_pixel_share` of the
-  // pixels that measure it.
+  // pixels that measure it, or when the clusters that measure it hold less than
+  // 1 - `unreliable_pixel_share` of the fitted pixels (the others hold the U3M default).
   // Lobe fraction: 2.5 x the default relative noise; a lobe below it hides in the noise and the
   // diffuse shape. Measured per-pixel largest lobe fraction (stability suite, preset fast): plain
   // bump field (roughness 0.6) 0.10-0.14, white sample with clipping 0.04-0.06, woven mirror and

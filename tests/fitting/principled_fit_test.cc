@@ -36,6 +36,10 @@ constexpr double kHighNoiseRelative = 0.06;
 constexpr double kTargetRoughnessError = 0.05;
 constexpr double kTargetSpecularError = 0.1;
 constexpr double kTargetSheenError = 0.1;
+// A measured map whose mean error exceeds this must not be reported as reliable (the stability
+// suite's bound: a third of the 0..1 range, and the specular target would be too strict
+// a line between "off" and "fine" under model mismatch).
+constexpr double kReliabilityErrorBound = 0.1;
 
 // Two fabrics side by side: a near-grey matte-ish weave and a coloured, tinted, glossier one;
 // base colour varies per pixel so that per-pixel colour matters.
@@ -86,6 +90,25 @@ void ExpectRecovered(const Scene& scene, const FitResult& result, FitParameter p
 }
 
 // Mean absolute error of a parameter over fitted pixels (left-out maps count with their value).
+double MeanAbsError(const Scene& scene, const FitResult& result, FitParameter parameter);
+
+// Every measured map is reliable (clean data the model explains), or, with `bad_data`, every
+// measured map off by more than kReliabilityErrorBound is flagged, with a reason.
+void ExpectReliabilityVerdicts(const Scene& scene, const FitResult& result, bool bad_data) {
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    const FitParameter p = static_cast<FitParameter>(i);
+    const MapReport& m = result.report(p);
+    if (!m.measured) continue;
+    EXPECT_EQ(m.reliable, m.unreliable_reason.empty()) << FitParameterName(i);
+    if (!bad_data) {
+      EXPECT_TRUE(m.reliable) << FitParameterName(i) << ": " << m.unreliable_reason;
+    } else if (MeanAbsError(scene, result, p) > kReliabilityErrorBound) {
+      EXPECT_FALSE(m.reliable) << FitParameterName(i) << " off by " << MeanAbsError(scene, result, p)
+                               << " and reported reliable";
+    }
+  }
+}
+
 double MeanAbsError(const Scene& scene, const FitResult& result, FitParameter parameter) {
   const int width = scene.stack.grid.width;
   const Image& map = result.map(parameter);
@@ -174,6 +197,8 @@ TEST_F(PrincipledFitTest, OverheadRigRecoversEveryObservableLobeAndLeavesSheenOu
   EXPECT_NE(sheen.reason.find("oblique"), std::string::npos) << sheen.reason;
   EXPECT_FALSE(result.report(FitParameter::kSheenTint).measured);
   EXPECT_FALSE(result.report(FitParameter::kMetallic).measured);
+  ExpectReliabilityVerdicts(scene, result, /*bad_data=*/false);
+  for (const ClusterFit& c : result.clusters) EXPECT_GT(c.highlight_share, 0.5) << "cluster " << c.id;
 
   // Lights left out of the fit re-render within the 2 %.
   for (const Observation& o : scene.stack.observations) {
@@ -418,6 +443,7 @@ TEST_F(PrincipledFitTest, StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan) {
     const MapReport& roughness = result.report(FitParameter::kRoughness);
     ASSERT_TRUE(roughness.measured) << "the data exclude the default roughness 0.7: " << roughness.reason;
     EXPECT_LT(roughness.value, kStiffRoughnessBound);
+    ExpectReliabilityVerdicts(scene, result, /*bad_data=*/true);
   } else {
     EXPECT_FALSE(result.convergence.messages.empty());
   }
@@ -590,6 +616,10 @@ TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
   bool flagged = false;
   for (const std::string& m : result.convergence.messages) flagged = flagged || m.find("mismatch") != std::string::npos;
   EXPECT_TRUE(flagged) << "the convergence report names the model mismatch";
+  ExpectReliabilityVerdicts(scene, result, /*bad_data=*/true);
+  bool any_unreliable = false;
+  for (const MapReport& m : result.maps) any_unreliable = any_unreliable || (m.measured && !m.reliable);
+  EXPECT_TRUE(any_unreliable) << "the misfit clusters' parameters are flagged";
   if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
     std::cout << "mismatch: mean |error| roughness " << roughness << ", specular " << specular << ", sheen " << sheen
               << " (Charlie sheen value vs Disney sheen fit); worst held-out relative RMSE " << worst_rmse
