@@ -33,6 +33,10 @@ constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 // A measured parameter whose posterior std at the final cluster solution exceeds this many max_std
 // is left out after all (end of the cluster fit).
 constexpr double kFinalStdFactor = 2.0;
+// Anisotropic below this counts as at its lower bound (the y-stretch test of FitCluster), and the
+// start of that test's refit (the twill preset's 0.2, well inside the bounds).
+constexpr double kAnisotropyAtBound = 0.01;
+constexpr double kAnisotropyProbeStart = 0.2;
 
 // Relative RMS residual above which a cluster counts as poorly explained: the option, or twice
 // the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
@@ -638,6 +642,46 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
                     std_dev[i], kFinalStdFactor * options.observability.max_std);
       e.measured = false;
       e.reason = buffer;
+    }
+  }
+
+  // Anisotropy is modelled along the shading frame's x axis (world +x projected: U3M
+  // anisotropy_rotation 0) only, with anisotropic in [0, 1]. A highlight stretched along y (a
+  // twill's warp when its weft runs along x) is outside that model and fits as 0 at the bound, with
+  // a small std that means nothing there. Test it: refit anisotropy (and roughness) with the frame
+  // turned by 90 degrees; if that explains the data clearly better, 0 is not the fabric's value.
+  ParameterEstimate& aniso = fit.parameters[kAnisotropic];
+  if (candidates[kAnisotropic] && aniso.value < kAnisotropyAtBound) {
+    ClusterSamples turned = samples;
+    for (LocalObservation& o : turned.observations) {
+      o.light_local = Eigen::Vector3d(o.light_local.y(), -o.light_local.x(), o.light_local.z());
+      o.view_local = Eigen::Vector3d(o.view_local.y(), -o.view_local.x(), o.view_local.z());
+    }
+    ParameterMask mask = decision.measured;
+    mask[kAnisotropic] = true;
+    ParameterMask free{};
+    free[kAnisotropic] = true;
+    free[kRoughness] = decision.measured[kRoughness];
+    ParameterVector across = params;
+    across[kAnisotropic] = kAnisotropyProbeStart;
+    const SolveOutcome probe = SolveCluster(turned, free, options, across);
+    if (probe.usable && across[kAnisotropic] > kAnisotropyAtBound) {
+      const double cost_now = SamplesCost(samples, samples.pixels(), params, options, residuals, mask);
+      const double cost_across = SamplesCost(turned, turned.pixels(), across, options, residuals, mask);
+      const double gain = EffectiveChi2Increase(cost_across, cost_now, context, options.observability);
+      if (gain > options.observability.default_rejection_chi2) {
+        char buffer[320];
+        std::snprintf(buffer, sizeof buffer,
+                      "the highlights are stretched along the image y axis (anisotropic %.2f with the tangent turned "
+                      "90 deg, chi^2 -%.3g), which the fit's x-axis tangent (anisotropy_rotation 0) cannot represent",
+                      across[kAnisotropic], gain);
+        if (aniso.measured) {
+          aniso.reliable = false;
+          aniso.unreliable_reason = std::string(buffer) + ": the fitted 0 is not the fabric's value";
+        } else {
+          aniso.reason += std::string(aniso.reason.empty() ? "" : "; ") + buffer;
+        }
+      }
     }
   }
   return fit;
