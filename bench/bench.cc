@@ -140,6 +140,10 @@ void ReadReport(const fs::path& report_path, BenchRow* row) {
   if (report.contains("options")) {
     row->solver_used = report["options"].value("solver", std::string());
     row->integrator_used = report["options"].value("integrator", std::string());
+    row->fit_mode_used = report["options"].value("fit_mode", std::string());
+  }
+  for (const json& parameter : report.value("parameters", json::array())) {
+    if (!parameter.value("reliable", true)) row->unreliable.push_back(parameter.value("name", std::string()));
   }
   StageSeconds& s = row->stages;
   // Per-light calibration steps are counted, not listed ("calibration: light x12").
@@ -177,6 +181,7 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
                                    "--id", kRunId, "--created", kRunCreated};
   if (!c.solver.empty()) args.insert(args.end(), {"--solver", c.solver});
   if (!c.integrator.empty()) args.insert(args.end(), {"--integrator", c.integrator});
+  if (!c.fit_mode.empty()) args.insert(args.end(), {"--fit-mode", c.fit_mode});
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);
@@ -260,6 +265,7 @@ std::string BenchCase::RunId() const {
   std::string id = CaptureId() + "_" + preset;
   if (!solver.empty()) id += "_ps-" + solver;
   if (!integrator.empty()) id += "_int-" + integrator;
+  if (!fit_mode.empty()) id += "_fit-" + fit_mode;
   return id;
 }
 
@@ -289,40 +295,42 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
       for (const auto& preset : presets) {
         if (quick && scene == "velvet" && (preset != "fast" || std::string(rig) != "distant")) continue;
         if (quick && preset == "best" && std::string(rig) == "near") continue;  // best costs 2x balanced
-        add({scene, rig, base, 0, true, preset, "", "", "matrix"});
+        add({scene, rig, base, 0, true, preset, "", "", "matrix", ""});
       }
     }
   }
   // Oblique camera (top + oblique view): sheen becomes measurable. Full: velvet, every preset;
   // quick: plain, fast (against plain/near/fast: the time the second view costs).
   if (quick) {
-    add({"plain", "oblique", base, 0, true, "fast", "", "", "matrix"});
+    add({"plain", "oblique", base, 0, true, "fast", "", "", "matrix", ""});
   } else {
-    for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix"});
+    for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix", ""});
   }
   // Methods on the same captures: ls vs robust photometric stereo, dct vs robust integration,
-  // against the balanced run (robust + dct). fast vs balanced also compares cluster-only with
-  // per-pixel fitting (the pipeline has no separate switch for it).
+  // clusters vs per-pixel fitting, against the balanced run (robust + dct + per-pixel).
   for (const char* rig : {"distant", "near"}) {
     if (quick && std::string(rig) == "near") continue;
-    add({"plain", rig, base, 0, true, "balanced", "ls", "", "methods"});
-    add({"plain", rig, base, 0, true, "balanced", "", "robust", "methods"});
+    add({"plain", rig, base, 0, true, "balanced", "ls", "", "methods", ""});
+    add({"plain", rig, base, 0, true, "balanced", "", "robust", "methods", ""});
+    add({"plain", rig, base, 0, true, "balanced", "", "", "methods", "clusters"});
   }
+  // Fit mode on a woven scene with per-thread variation (full matrix: where a texture can pay off).
+  if (!quick) add({"twill", "distant", base, 0, true, "balanced", "", "", "methods", "clusters"});
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).
-  add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less"});
-  if (!quick) add({"plain", "near", base, 0, false, "balanced", "", "", "needs-less"});
+  add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", ""});
+  if (!quick) add({"plain", "near", base, 0, false, "balanced", "", "", "needs-less", ""});
   // Megapixel axis (with the base size of the matrix).
   for (int size : quick ? std::vector<int>{80} : std::vector<int>{256, 512}) {
     for (const char* preset : {"fast", "balanced"}) {
       if (quick && std::string(preset) != "fast") continue;
-      add({"plain", "distant", size, 0, true, preset, "", "", "size"});
+      add({"plain", "distant", size, 0, true, preset, "", "", "size", ""});
     }
   }
   // Lights axis (the rigs have 16).
   for (int lights : quick ? std::vector<int>{8} : std::vector<int>{6, 8, 12}) {
     for (const char* preset : {"fast", "balanced"}) {
       if (quick && std::string(preset) != "fast") continue;
-      add({"plain", "distant", base, lights, true, preset, "", "", "lights"});
+      add({"plain", "distant", base, lights, true, preset, "", "", "lights", ""});
     }
   }
   return cases;
@@ -330,11 +338,11 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
 
 std::vector<std::string> BenchCsvColumns() {
   return {"group", "scene", "rig", "size_px", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
-          "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
+          "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
           "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "error"};
+          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "unreliable", "error"};
 }
 
 void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
@@ -346,7 +354,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     auto v = [&](double x, int d) { return ok ? Fixed(x, d) : std::string(); };
     std::vector<std::string> cells = {
         r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), v(r.megapixels, 4), std::to_string(r.lights_used),
-        r.c.calibration_frames ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.status,
+        r.c.calibration_frames ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.fit_mode_used, r.status,
         Fixed(r.wall_s, 3), v(r.total_s, 3), Fixed(r.peak_rss_mib, 1), v(r.stages.read, 3), v(r.stages.calibration, 3),
         v(r.stages.rectify, 3), v(r.stages.alpha, 3), v(r.stages.photometric_stereo, 3), v(r.stages.integration, 3),
         v(r.stages.fit, 3), v(r.stages.write, 3), Join(r.skipped, "; "), v(e.normal_mean_deg, 3),
@@ -354,6 +362,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
         v(e.height_rmse_mm, 5), v(e.height_rmse_percent, 2)};
     for (int p = 0; p < 7; ++p) cells.push_back(ParameterCell(r, p));
     cells.push_back(v(e.rerender_relative_rmse, 4));
+    cells.push_back(Join(r.unreliable, "; "));
     cells.push_back(r.error);
     for (auto& cell : cells) cell = Csv(cell);
     s << Join(cells, ",") << "\n";
@@ -413,13 +422,16 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
   // Methods: each override run against the balanced run on the same capture.
   auto find = [&](const std::string& capture, const std::string& preset) -> const BenchRow* {
     for (const BenchRow& r : rows) {
-      if (r.c.CaptureId() == capture && r.c.preset == preset && r.c.solver.empty() && r.c.integrator.empty() && r.status == "ok") return &r;
+      if (r.c.CaptureId() == capture && r.c.preset == preset && r.c.solver.empty() && r.c.integrator.empty() &&
+          r.c.fit_mode.empty() && r.status == "ok") {
+        return &r;
+      }
     }
     return nullptr;
   };
   s << "\n## Methods on the same capture\n\n| capture | method | total s | step s | normal mean deg | height RMSE % | re-render % |\n|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
-    if (r.c.group != "methods" || r.status != "ok") continue;
+    if (r.c.group != "methods" || r.status != "ok" || !r.c.fit_mode.empty()) continue;
     const BenchRow* base = find(r.c.CaptureId(), "balanced");
     auto line = [&](const BenchRow& x, const std::string& label, double step_s) {
       s << "| " << x.c.CaptureId() << " | " << label << " | " << Fixed(x.total_s, 2) << " | " << Fixed(step_s, 2) << " | "
@@ -431,15 +443,20 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
                    ps ? base->stages.photometric_stereo : base->stages.integration);
     line(r, ps ? "PS " + r.solver_used : "integration " + r.integrator_used, ps ? r.stages.photometric_stereo : r.stages.integration);
   }
-  s << "\nCluster-only against per-pixel fitting: `fast` fits per cluster only, `balanced` adds the per-pixel refit "
-       "(compare their fit s and parameter errors in the table above; the pipeline has no separate switch for it).\n";
+  // Fit mode: --fit-mode clusters against the balanced run (per-pixel) on the same capture.
+  s << "\n### Fit: clusters vs per-pixel (same capture, preset balanced)\n\n| capture | fit mode | total s | fit s | "
+       "roughness err | specular err | anisotropic err | re-render % | flagged unreliable |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
-    if (r.c.group != "matrix" || r.c.preset != "fast" || r.status != "ok") continue;
-    const BenchRow* b = find(r.c.CaptureId(), "balanced");
-    if (!b) continue;
-    s << "- " << r.c.CaptureId() << ": fit " << Fixed(r.stages.fit, 2) << " s (cluster only) vs " << Fixed(b->stages.fit, 2)
-      << " s (per pixel); roughness error " << ParameterCell(r, 0) << " vs " << ParameterCell(*b, 0) << ", re-render "
-      << Fixed(100 * r.evaluation.rerender_relative_rmse, 2) << " % vs " << Fixed(100 * b->evaluation.rerender_relative_rmse, 2) << " %\n";
+    if (r.c.group != "methods" || r.status != "ok" || r.c.fit_mode.empty()) continue;
+    const BenchRow* base = find(r.c.CaptureId(), "balanced");
+    auto line = [&](const BenchRow& x) {
+      s << "| " << x.c.CaptureId() << " | " << x.fit_mode_used << " | " << Fixed(x.total_s, 2) << " | "
+        << Fixed(x.stages.fit, 2) << " | " << ParameterCell(x, 0) << " | " << ParameterCell(x, 1) << " | "
+        << ParameterCell(x, 5) << " | " << Fixed(100.0 * x.evaluation.rerender_relative_rmse, 2) << " | "
+        << Join(x.unreliable, "; ") << " |\n";
+    };
+    if (base) line(*base);
+    line(r);
   }
 
   // Needs less: steps skipped and the time they save.

@@ -11,7 +11,7 @@
 //
 // Matrix: every fabric preset of the synthetic scanner x {distant, near} rigs x every preset at the base size; plus, on one
 // scene, the method comparisons (ls vs robust photometric stereo, dct vs robust integration,
-// cluster-only vs per-pixel fitting via the presets), the "needs less" pairs (no calibration
+// clusters vs per-pixel fitting), the "needs less" pairs (no calibration
 // frames, no oblique camera vs oblique), sizes for the megapixel axis and light subsets for the
 // lights axis. --quick shrinks every axis.
 
@@ -33,6 +33,7 @@ struct BenchCase {
   std::string solver;         // "" = the preset's
   std::string integrator;     // "" = the preset's
   std::string group;          // why the case is in the matrix: matrix | methods | needs-less | size | lights
+  std::string fit_mode;       // "" = the preset's; clusters | per-pixel (u3mscan process --fit-mode)
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };
@@ -47,7 +48,8 @@ struct BenchRow {
   double megapixels = 0;       // finished map pixels / 1e6
   std::string status = "ok";   // ok | failed (exit code and message in `error`)
   std::string error;
-  std::string solver_used, integrator_used;  // from report.json /options
+  std::string solver_used, integrator_used, fit_mode_used;  // from report.json /options
+  std::vector<std::string> unreliable;  // parameters report.json flags unreliable ("front/specular_value")
   double wall_s = 0;           // child process, fork to exit
   double total_s = 0;          // report.json /total_seconds
   double peak_rss_mib = 0;     // child's max RSS (wait4)

@@ -193,11 +193,13 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
 
   // Fitted parameters: the per-pixel map when the run wrote one, else the material's constant.
   std::map<std::string, std::pair<std::string, double>> written;  // u3m key -> (source, value)
+  std::map<std::string, bool> reliable;                            // u3m key -> report's verdict
   if (report.contains("parameters") && report["parameters"].is_array()) {
     for (const json& p : report["parameters"]) {
       const std::string name = p.value("name", std::string());
       if (name.rfind(options.side + "/", 0) != 0) continue;
       written[name.substr(options.side.size() + 1)] = {p.value("source", std::string()), p.value("value", 0.0)};
+      reliable[name.substr(options.side.size() + 1)] = p.value("reliable", true);
     }
   }
   Image estimate_maps[kParameterCount];
@@ -216,6 +218,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
     estimate_maps[p] = read_optional(e.name);
     check_size(estimate_maps[p], e.name, 1);
     if (it != written.end()) constants[p] = it->second.second;
+    if (reliable.count(e.u3m_key)) e.reliable = reliable[e.u3m_key];
     if (not_measured) {
       e.source = "not measured";
       estimate_maps[p] = Image();
@@ -414,7 +417,7 @@ json EvaluationToJson(const Evaluation& ev) {
   json parameters = json::array();
   for (const auto& p : ev.parameters) {
     parameters.push_back({{"name", p.name}, {"u3m_key", p.u3m_key}, {"source", p.source}, {"measured", p.measured},
-                          {"truth_mean", Number(p.truth_mean)}, {"estimate_mean", Number(p.estimate_mean)},
+                          {"reliable", p.reliable}, {"truth_mean", Number(p.truth_mean)}, {"estimate_mean", Number(p.estimate_mean)},
                           {"mean_abs_error", Number(p.mean_abs_error)}, {"bias", Number(p.bias)}});
   }
   return {{"side", ev.side},
@@ -445,7 +448,8 @@ std::string EvaluationToText(const Evaluation& ev) {
       s << p.source << " (material " << Fixed(p.estimate_mean, 3) << ", truth mean " << Fixed(p.truth_mean, 3) << ")\n";
     } else {
       s << "|error| " << Fixed(p.mean_abs_error, 4) << "  bias " << Fixed(p.bias, 4) << "  (" << p.source << ", mean "
-        << Fixed(p.estimate_mean, 3) << ", truth " << Fixed(p.truth_mean, 3) << ")\n";
+        << Fixed(p.estimate_mean, 3) << ", truth " << Fixed(p.truth_mean, 3) << ")"
+        << (p.reliable ? "" : "  flagged unreliable by the run") << "\n";
     }
   }
   s << "re-render, " << ev.held_out_lights << " held-out lights: relative RMSE " << Fixed(100.0 * ev.rerender_relative_rmse, 2) << " %\n";

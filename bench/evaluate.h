@@ -35,6 +35,7 @@ struct ParameterError {
   std::string u3m_key;     // roughness, specular_value, ...
   std::string source;      // "map" (per-pixel texture), "constant" (U3M constant), "not measured", "absent"
   bool measured = false;
+  bool reliable = true;          // false: the run's report flags the value unreliable (docs/fitting.md)
   double truth_mean = 0.0;       // over the compared pixels
   double estimate_mean = 0.0;    // the material's value (map mean or constant)
   double mean_abs_error = 0.0;   // mean over compared pixels of |estimate - truth| (NaN when not measured)

@@ -15,7 +15,7 @@ namespace {
 U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled parameter maps and fit.json", 50,
                          [](CLI::App& sub) {
   struct Args {
-    std::string capture, out, side = "front", preset = "balanced";
+    std::string capture, out, side = "front", preset = "balanced", fit_mode;
     double dpi = 0.0;
   };
   auto args = std::make_shared<Args>();
@@ -25,14 +25,19 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
       ->capture_default_str()
       ->check(CLI::IsMember({"fast", "balanced", "best"}));
   sub.add_option("--side", args->side, "front | back")->capture_default_str()->check(CLI::IsMember({"front", "back"}));
+  sub.add_option("--fit-mode", args->fit_mode,
+                 "Override the preset's fit: clusters (cluster values only) | per-pixel (refined per pixel)")
+      ->check(CLI::IsMember({"clusters", "per-pixel"}));
   sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
   sub.footer(
       "Runs calibration and reconstruction first. Writes DIR/maps/<parameter>.exr for every measured\n"
       "parameter (roughness, specular, ...; base_color linear RGB) and DIR/fit.json. Parameters the\n"
-      "capture does not constrain get no map: fit.json says why.");
+      "capture does not constrain get no map: fit.json says why. A measured parameter the fit's own\n"
+      "evidence does not trust is marked UNRELIABLE, with the reason (fit.json: \"reliable\": false).");
   return std::function<int()>([args] {
     StageOptions stages = OptionsForPreset(ParsePreset(args->preset));
     if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
+    if (!args->fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(args->fit_mode);
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
@@ -49,7 +54,8 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
       const auto& decision = fit.maps[p];
       std::cout << "  " << fitting::FitParameterName(p) << ": "
                 << (!decision.measured ? "not measured" : decision.constant ? "constant" : "map") << " "
-                << decision.value << (decision.reason.empty() ? "" : " (" + decision.reason + ")") << "\n";
+                << decision.value << (decision.reason.empty() ? "" : " (" + decision.reason + ")")
+                << (decision.measured && !decision.reliable ? " UNRELIABLE: " + decision.unreliable_reason : "") << "\n";
     }
     PrintSteps(report);
     std::cout << "maps and fit.json in " << args->out << "\n";

@@ -49,6 +49,9 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
       ->check(CLI::IsMember({"ls", "robust"}));
   sub.add_option("--integrator", args->options.integrator, "Override the preset's integration: dct | robust")
       ->check(CLI::IsMember({"dct", "robust"}));
+  sub.add_option("--fit-mode", args->options.fit_mode,
+                 "Override the preset's fit: clusters (cluster values only) | per-pixel (refined per pixel)")
+      ->check(CLI::IsMember({"clusters", "per-pixel"}));
   sub.add_option("--name", args->name, "File name of the material (one capture only; default: the capture folder's name)");
   sub.add_option("--id", args->id, "Material id (a lowercase version-4 UUID) instead of a new random one");
   sub.add_option("--created", args->created, "Creation time (UTC, 2026-11-22T10:00:00Z) instead of now");

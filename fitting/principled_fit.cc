@@ -33,6 +33,10 @@ constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 // A measured parameter whose posterior std at the final cluster solution exceeds this many max_std
 // is left out after all (end of the cluster fit).
 constexpr double kFinalStdFactor = 2.0;
+// Anisotropic below this counts as at its lower bound (the y-stretch test of FitCluster), and the
+// start of that test's refit (the twill preset's 0.2, well inside the bounds).
+constexpr double kAnisotropyAtBound = 0.01;
+constexpr double kAnisotropyProbeStart = 0.2;
 
 // Relative RMS residual above which a cluster counts as poorly explained: the option, or twice
 // the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
@@ -437,7 +441,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   if (samples.pixels() == 0) {
     fit.message = "no usable pixels";
     for (int i = 0; i < kFitParameterCount; ++i) {
-      fit.parameters[i] = {params[i], std::numeric_limits<double>::infinity(), false, "no usable pixels in the cluster"};
+      fit.parameters[i] = {params[i], std::numeric_limits<double>::infinity(), false, "no usable pixels in the cluster", true, ""};
     }
     return fit;
   }
@@ -640,6 +644,46 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
       e.reason = buffer;
     }
   }
+
+  // Anisotropy is modelled along the shading frame's x axis (world +x projected: U3M
+  // anisotropy_rotation 0) only, with anisotropic in [0, 1]. A highlight stretched along y (a
+  // twill's warp when its weft runs along x) is outside that model and fits as 0 at the bound, with
+  // a small std that means nothing there. Test it: refit anisotropy (and roughness) with the frame
+  // turned by 90 degrees; if that explains the data clearly better, 0 is not the fabric's value.
+  ParameterEstimate& aniso = fit.parameters[kAnisotropic];
+  if (candidates[kAnisotropic] && aniso.value < kAnisotropyAtBound) {
+    ClusterSamples turned = samples;
+    for (LocalObservation& o : turned.observations) {
+      o.light_local = Eigen::Vector3d(o.light_local.y(), -o.light_local.x(), o.light_local.z());
+      o.view_local = Eigen::Vector3d(o.view_local.y(), -o.view_local.x(), o.view_local.z());
+    }
+    ParameterMask mask = decision.measured;
+    mask[kAnisotropic] = true;
+    ParameterMask free{};
+    free[kAnisotropic] = true;
+    free[kRoughness] = decision.measured[kRoughness];
+    ParameterVector across = params;
+    across[kAnisotropic] = kAnisotropyProbeStart;
+    const SolveOutcome probe = SolveCluster(turned, free, options, across);
+    if (probe.usable && across[kAnisotropic] > kAnisotropyAtBound) {
+      const double cost_now = SamplesCost(samples, samples.pixels(), params, options, residuals, mask);
+      const double cost_across = SamplesCost(turned, turned.pixels(), across, options, residuals, mask);
+      const double gain = EffectiveChi2Increase(cost_across, cost_now, context, options.observability);
+      if (gain > options.observability.default_rejection_chi2) {
+        char buffer[320];
+        std::snprintf(buffer, sizeof buffer,
+                      "the highlights are stretched along the image y axis (anisotropic %.2f with the tangent turned "
+                      "90 deg, chi^2 -%.3g), which the fit's x-axis tangent (anisotropy_rotation 0) cannot represent",
+                      across[kAnisotropic], gain);
+        if (aniso.measured) {
+          aniso.reliable = false;
+          aniso.unreliable_reason = std::string(buffer) + ": the fitted 0 is not the fabric's value";
+        } else {
+          aniso.reason += std::string(aniso.reason.empty() ? "" : "; ") + buffer;
+        }
+      }
+    }
+  }
   return fit;
 }
 
@@ -777,7 +821,41 @@ std::string JsonString(const std::string& s) {
   return out + "\"";
 }
 
+// Share of the cluster's samples with at least one usable observation in which the fitted specular
+// lobe (the prediction minus the prediction at specular 0, same base colour) carries at least
+// `options.highlight_lobe_fraction` of the predicted luminance: how many pixels actually saw a
+// highlight the fit could measure specular and roughness on.
+double HighlightShare(const ClusterSamples& samples, const ParameterVector& params, const ParameterMask& free,
+                      const FitOptions& options) {
+  if (samples.pixels() == 0) return 0.0;
+  ParameterVector matte = params;
+  matte[kSpecular] = 0.0;
+  std::size_t with_highlight = 0;
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    const auto obs = samples.pixel(p);
+    const Eigen::Vector3d color = SolveBaseColor(params, obs, Settings(options, params, free, samples.luminance_start[p]));
+    if (!color.allFinite()) continue;
+    for (const LocalObservation& o : obs) {
+      const double full = Luminance(RenderLocal(params, color, o.light_local, o.view_local, o.irradiance));
+      const double lobe = full - Luminance(RenderLocal(matte, color, o.light_local, o.view_local, o.irradiance));
+      if (full > 0.0 && lobe >= options.highlight_lobe_fraction * full) {
+        ++with_highlight;
+        break;
+      }
+    }
+  }
+  return static_cast<double>(with_highlight) / static_cast<double>(samples.pixels());
+}
+
 }  // namespace
+
+const char* FitModeName(FitMode mode) { return mode == FitMode::kClusters ? "clusters" : "per-pixel"; }
+
+FitMode ParseFitMode(const std::string& name) {
+  if (name == "clusters") return FitMode::kClusters;
+  if (name == "per-pixel") return FitMode::kPerPixel;
+  throw std::invalid_argument("fit mode must be clusters or per-pixel, got '" + name + "'");
+}
 
 const char* U3mParameterName(FitParameter parameter) {
   switch (parameter) {
@@ -798,7 +876,9 @@ bool FitOptions::Check() const {
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
          mismatch_relative_rms > 0.0 && unusable_relative_rms >= mismatch_relative_rms && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
          pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0 && normal_refinement_passes >= 0 && normal_iterations >= 1 &&
-         normal_max_change_deg > 0.0 && normal_max_change_deg < 90.0;
+         normal_max_change_deg > 0.0 && normal_max_change_deg < 90.0 && min_highlight_share >= 0.0 &&
+         min_highlight_share <= 1.0 && highlight_lobe_fraction > 0.0 && highlight_lobe_fraction < 1.0 &&
+         unreliable_pixel_share >= 0.0 && unreliable_pixel_share < 1.0;
 }
 
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
@@ -887,6 +967,15 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         s.luminance_start.push_back(0.2);
       }
       result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
+      std::size_t saturated = 0, seen = 0;  // over the sampled pixels' observations
+      for (std::size_t j = 0; j < take; ++j) {
+        const std::size_t index = m[j * m.size() / take];
+        for (const Observation& o : stack.observations) {
+          ++seen;
+          if (!o.flags.empty() && (o.flags[index] & kSaturated) != 0) ++saturated;
+        }
+      }
+      const double saturated_share = seen > 0 ? static_cast<double>(saturated) / static_cast<double>(seen) : 0.0;
       // Normal refinement: the sampled pixels' normals refitted with the full model at the
       // cluster's parameters, then the cluster refitted on them (see RefineNormal).
       std::vector<double> scratch;
@@ -917,6 +1006,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
         observability_s[c] += pass_observability_s;
       }
+      result.clusters[c].saturated_share = saturated_share;
       std::lock_guard lock(progress_mutex);
       ReportProgress(progress, "fit: clusters", static_cast<double>(++done) / k);
     }
@@ -957,6 +1047,44 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       e.measured = false;
       e.std_dev = std::numeric_limits<double>::infinity();
       e.reason = buffer;
+    }
+  }
+
+  // Reliability of what the clusters measured (FitOptions, "Reliability"): evidence that the value
+  // may be off by more than its posterior std, which assumes the model fits and the data cover it.
+  for (int c = 0; c < k; ++c) {
+    ClusterFit& f = result.clusters[c];
+    ParameterVector params;
+    ParameterMask measured{};
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      const ParameterEstimate& e = f.parameters[i];
+      params[i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+      measured[i] = e.measured;
+    }
+    f.highlight_share = HighlightShare(samples[c], params, measured, options);
+    // A metal's specular lobe does not depend on `specular`: the highlight test does not apply.
+    const bool metal = measured[kMetallic] && params[kMetallic] > 0.0;
+    char misfit[240], no_highlight[300];
+    std::snprintf(misfit, sizeof misfit,
+                  "the model explains this cluster's data only to a relative RMS residual of %.3g (> %.3g): the value "
+                  "is likely biased by more than its posterior std",
+                  f.rms_relative_residual, MismatchThreshold(options));
+    std::snprintf(no_highlight, sizeof no_highlight,
+                  "no usable highlight: %.0f %% of the cluster's samples (< %.0f %%) have an observation in which the "
+                  "fitted specular lobe carries %.1f %% of the signal, and %.0f %% of their observations are saturated; "
+                  "the value is inferred from the highlights' absence (they fall between the lights or clip)",
+                  100.0 * f.highlight_share, 100.0 * options.min_highlight_share, 100.0 * options.highlight_lobe_fraction,
+                  100.0 * f.saturated_share);
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      ParameterEstimate& e = f.parameters[i];
+      if (!e.measured) continue;
+      if (f.rms_relative_residual > MismatchThreshold(options)) {
+        e.reliable = false;
+        e.unreliable_reason = misfit;
+      } else if ((i == kRoughness || i == kSpecular) && !metal && f.highlight_share < options.min_highlight_share) {
+        e.reliable = false;
+        e.unreliable_reason = no_highlight;
+      }
     }
   }
 
@@ -1021,7 +1149,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
         ParameterVector params = cluster_params[c];
         Eigen::Vector3d color;
-        if (options.refine_per_pixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
+        if (options.mode == FitMode::kPerPixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
           ParameterVector kept_sd;
           kept_sd.fill(-1.0);
@@ -1123,6 +1251,35 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       result.parameter_maps[i] = Image();
       continue;
     }
+    // Reliable unless the clusters that flag it hold more than unreliable_pixel_share of its pixels.
+    std::int64_t flagged_pixels = 0, measuring_pixels = 0;
+    int worst_flagged = -1;
+    for (int c = 0; c < k; ++c) {
+      const ParameterEstimate& e = result.clusters[c].parameters[i];
+      if (!e.measured) continue;
+      measuring_pixels += result.clusters[c].pixel_count;
+      if (e.reliable) continue;
+      flagged_pixels += result.clusters[c].pixel_count;
+      if (worst_flagged < 0 || result.clusters[c].pixel_count > result.clusters[worst_flagged].pixel_count) worst_flagged = c;
+    }
+    if (measuring_pixels > 0 &&
+        static_cast<double>(flagged_pixels) > options.unreliable_pixel_share * static_cast<double>(measuring_pixels)) {
+      char buffer[120];
+      std::snprintf(buffer, sizeof buffer, "unreliable in clusters holding %.0f %% of its pixels (largest, cluster %d: ",
+                    100.0 * static_cast<double>(flagged_pixels) / static_cast<double>(measuring_pixels), worst_flagged);
+      report.reliable = false;
+      report.unreliable_reason = buffer + result.clusters[worst_flagged].parameters[i].unreliable_reason + ")";
+    } else if (n > 0 && static_cast<double>(measuring_pixels) <
+                            (1.0 - options.unreliable_pixel_share) * static_cast<double>(n)) {
+      // Measured where it is, but most pixels hold the U3M default: the map as a whole is a guess.
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "measured only in clusters holding %.0f %% of the fitted pixels; the others hold the U3M default "
+                    "%.3g",
+                    100.0 * static_cast<double>(measuring_pixels) / static_cast<double>(n), FitParameterDefault(p));
+      report.reliable = false;
+      report.unreliable_reason = buffer;
+    }
     // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
     const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
     if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
@@ -1195,7 +1352,9 @@ std::string FitResultToJson(const FitResult& result) {
       << ": {\"u3m\": " << JsonString(U3mParameterName(static_cast<FitParameter>(i))) << ", \"measured\": "
       << (m.measured ? "true" : "false") << ", \"constant\": " << (m.constant ? "true" : "false")
       << ", \"texture\": " << (m.measured && !m.constant ? "true" : "false") << ", \"value\": " << JsonNumber(m.value)
-      << ", \"spread\": " << JsonNumber(m.spread) << ", \"reason\": " << JsonString(m.reason) << "}";
+      << ", \"spread\": " << JsonNumber(m.spread) << ", \"reason\": " << JsonString(m.reason)
+      << ", \"reliable\": " << (m.reliable ? "true" : "false")
+      << ", \"unreliable_reason\": " << JsonString(m.unreliable_reason) << "}";
   }
   j << "\n  },\n  \"not_measured\": [";
   bool first = true;
@@ -1213,14 +1372,17 @@ std::string FitResultToJson(const FitResult& result) {
       << ", \"samples\": " << f.sample_count << ", \"converged\": " << (f.converged ? "true" : "false")
       << ", \"iterations\": " << f.iterations << ", \"initial_cost\": " << JsonNumber(f.initial_cost)
       << ", \"final_cost\": " << JsonNumber(f.final_cost)
-      << ", \"rms_relative_residual\": " << JsonNumber(f.rms_relative_residual) << ", \"mean_base_color_linear\": ["
+      << ", \"rms_relative_residual\": " << JsonNumber(f.rms_relative_residual)
+      << ", \"saturated_share\": " << JsonNumber(f.saturated_share)
+      << ", \"highlight_share\": " << JsonNumber(f.highlight_share) << ", \"mean_base_color_linear\": ["
       << JsonNumber(f.mean_base_color(0)) << ", " << JsonNumber(f.mean_base_color(1)) << ", "
       << JsonNumber(f.mean_base_color(2)) << "], \"message\": " << JsonString(f.message) << ",\n     \"parameters\": {";
     for (int i = 0; i < kFitParameterCount; ++i) {
       const ParameterEstimate& e = f.parameters[i];
       j << (i ? ", " : "") << "\n       " << JsonString(FitParameterName(i)) << ": {\"value\": " << JsonNumber(e.value)
         << ", \"std\": " << JsonNumber(e.std_dev) << ", \"measured\": " << (e.measured ? "true" : "false")
-        << ", \"reason\": " << JsonString(e.reason) << "}";
+        << ", \"reason\": " << JsonString(e.reason) << ", \"reliable\": " << (e.reliable ? "true" : "false")
+        << ", \"unreliable_reason\": " << JsonString(e.unreliable_reason) << "}";
     }
     j << "}}";
   }
@@ -1243,7 +1405,7 @@ std::string FitResultToJson(const FitResult& result) {
     << ", \"robust_scale_sigma\": " << JsonNumber(o.robust_loss.scale)
     << ", \"observability_max_std\": " << JsonNumber(o.observability.max_std)
     << ", \"observability_effective_pixels\": " << o.observability.effective_pixels
-    << ", \"refine_per_pixel\": " << (o.refine_per_pixel ? "true" : "false") << ", \"seed\": " << o.clustering.seed
+    << ", \"mode\": " << JsonString(FitModeName(o.mode)) << ", \"seed\": " << o.clustering.seed
     << "}\n}\n";
   return j.str();
 }

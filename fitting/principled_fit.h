@@ -32,6 +32,12 @@
 
 namespace u3mscan::fitting {
 
+// Cluster values only, or cluster values refined per pixel where a pixel's own highlights allow.
+enum class FitMode { kClusters, kPerPixel };
+// "clusters" / "per-pixel"; ParseFitMode throws std::invalid_argument for another word.
+const char* FitModeName(FitMode mode);
+FitMode ParseFitMode(const std::string& name);
+
 struct FitOptions {
   ClusteringOptions clustering;
   ObservabilityOptions observability;
@@ -75,10 +81,30 @@ struct FitOptions {
   // A cluster whose relative RMS residual exceeds this measures nothing: every shared parameter is
   // left out with the reason (the model does not explain the data; values would be biased).
   double unusable_relative_rms = 0.15;
+  // Reliability (docs/fitting.md, "Reliable or not"): a measured parameter is flagged unreliable
+  // (written, with the flag and the reason in the reports) when the fit's own evidence says its
+  // value may be off by more than its posterior std:
+  //   - its cluster's relative RMS residual exceeds the mismatch threshold above (the model does
+  //     not explain the data: the value is biased by an unknown amount);
+  //   - for specular and roughness: fewer than `min_highlight_share` of the cluster's samples show a
+  //     usable observation in which the fitted specular lobe carries at least
+  //     `highlight_lobe_fraction` of the signal (highlights fell between the lights or saturated: the
+  //     value is inferred from their absence).
+  // A map is flagged when the clusters that flag it hold more than `unreliable_pixel_share` of the
+  // pixels that measure it, or when the clusters that measure it hold less than
+  // 1 - `unreliable_pixel_share` of the fitted pixels (the others hold the U3M default).
+  // Lobe fraction: 2.5 x the default relative noise; a lobe below it hides in the noise and the
+  // diffuse shape. Measured per-pixel largest lobe fraction (stability suite, preset fast): plain
+  // bump field (roughness 0.6) 0.10-0.14, white sample with clipping 0.04-0.06, woven mirror and
+  // open-gauze presets (values wrong by 0.3-0.5) 0.000-0.02.
+  double min_highlight_share = 0.05;
+  double highlight_lobe_fraction = 0.025;
+  double unreliable_pixel_share = 0.5;
   // Per-pixel refinement of roughness (and optionally specular, which a single pixel rarely pins
   // down; docs/principled-brdf.md). Costs ~3 extra residual evaluations per refined pixel and
-  // Gauss-Newton iteration, 2 more with specular.
-  bool refine_per_pixel = true;
+  // Gauss-Newton iteration, 2 more with specular. FitMode::kClusters turns it off (cluster values
+  // only, per pixel just the closed-form base colour).
+  FitMode mode = FitMode::kPerPixel;
   bool refine_specular_per_pixel = false;
   double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
   double pixel_max_std = 0.05;       // a pixel's value is kept only if its posterior std is below this
@@ -105,6 +131,10 @@ struct ParameterEstimate {
   double std_dev = 0.0;  // posterior standard deviation; inf when not measured
   bool measured = false;
   std::string reason;    // why it was left out; for a measured one only a "weakly constrained" note
+  // Measured, but the fit's evidence says the value may be off by more than std_dev (see
+  // FitOptions, "Reliability"); `unreliable_reason` says which evidence. Meaningless if !measured.
+  bool reliable = true;
+  std::string unreliable_reason;
 };
 
 struct ClusterFit {
@@ -116,6 +146,11 @@ struct ClusterFit {
   double initial_cost = 0.0;         // Ceres cost at the grid start
   double final_cost = 0.0;           // Ceres cost at the solution
   double rms_relative_residual = 0;  // RMS of (prediction - data) / data over sampled observations
+  // Evidence for the reliability verdict, over the cluster's samples: share of their observations
+  // dropped as saturated, and share of samples with a usable observation dominated by the fitted
+  // specular lobe (FitOptions::highlight_lobe_fraction).
+  double saturated_share = 0.0;
+  double highlight_share = 0.0;
   int iterations = 0;
   bool converged = false;
   std::string message;               // Ceres termination / failure text
@@ -128,6 +163,10 @@ struct MapReport {
   double value = 0.0;      // default (not measured), constant, or pixel mean (texture)
   double spread = 0.0;     // standard deviation over fitted pixels
   std::string reason;      // why not measured / why constant
+  // Measured, but flagged unreliable by the clusters that hold most of its pixels (see FitOptions,
+  // "Reliability"): write it with the flag, never as a trusted value.
+  bool reliable = true;
+  std::string unreliable_reason;
 };
 
 struct StageTimes {

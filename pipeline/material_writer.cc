@@ -68,8 +68,9 @@ SideBuild BuildSide(const SideMaps& maps, const fs::path& staging, const Uniform
                     ScanMaterialResult* result) {
   SideBuild build;
   Visualization& v = build.visualization;
-  auto record = [&](const std::string& key, ParameterSource source, double value, const std::string& reason) {
-    build.records.push_back({maps.side + "/" + key, source, reason, value, 0.0});
+  auto record = [&](const std::string& key, ParameterSource source, double value, const std::string& reason,
+                    const std::string& unreliable_reason = "") {
+    build.records.push_back({maps.side + "/" + key, source, reason, value, 0.0, unreliable_reason});
   };
 
   // Base colour: sRGB texture unless uniform.
@@ -122,8 +123,8 @@ SideBuild BuildSide(const SideMaps& maps, const fs::path& staging, const Uniform
     result->files.push_back(path);
     result->displacement_mm_per_unit = hi - lo;
     result->displacement_zero_mm = lo;
-    record("displacement", ParameterSource::kMeasured, hi - lo, "integrated normals; value 1 = " +
-                                                                   std::to_string(hi - lo) + " mm above value 0");
+    record("displacement", ParameterSource::kMeasured, hi - lo,
+           "integrated normals; value 1 = " + std::to_string(hi - lo) + " mm above value 0", maps.height_unreliable_reason);
   }
 
   // Alpha from the backlight frame, only where the sample has holes.
@@ -151,7 +152,7 @@ SideBuild BuildSide(const SideMaps& maps, const fs::path& staging, const Uniform
     } else {
       *param = ScalarParam{true, choice.value, std::nullopt};
     }
-    record(choice.u3m_key, choice.source, choice.value, choice.reason);
+    record(choice.u3m_key, choice.source, choice.value, choice.reason, choice.unreliable_reason);
   }
   return build;
 }
@@ -222,6 +223,15 @@ ScanMaterialResult WriteScanMaterial(const ScanMaterialRequest& request, const f
       custom["displacement"] = {{"mm_per_unit", result.displacement_mm_per_unit},
                                 {"zero_mm", result.displacement_zero_mm},
                                 {"meaning", "height_mm = zero_mm + value * mm_per_unit, +z toward a camera above"}};
+    }
+    // A flagged parameter the caller's custom section does not list (the displacement) is listed
+    // there with its flag, so the material itself says what not to trust.
+    if (custom.contains("parameter_sources") && custom["parameter_sources"].is_object()) {
+      for (const ParameterRecord& p : result.parameters) {
+        if (p.reliable() || custom["parameter_sources"].contains(p.name)) continue;
+        custom["parameter_sources"][p.name] = {{"source", ParameterSourceName(p.source)}, {"reason", p.reason},
+                                               {"reliable", false}, {"unreliable_reason", p.unreliable_reason}};
+      }
     }
     JsonValue sections = JsonValue::Object();
     sections.Set(request.vendor_key, ParseJson(custom.dump(), "custom section"));

@@ -27,6 +27,7 @@ struct ScalarMapChoice {
   double value = 0.0;        // constant (default / uniform) or the fitted map's mean
   Image map;                 // kMeasured only: 1 channel on the side's grid
   std::string reason;
+  std::string unreliable_reason;  // non-empty: written, but flagged unreliable (ParameterRecord)
 };
 
 // The finished maps of one side, on the metric grid (every Image's pitch_mm is the grid pitch).
@@ -36,6 +37,7 @@ struct SideMaps {
   Image normal;                  // 3 channels, unit, world frame (x right, y up, z out of the fabric)
   Image height_mm;               // 1 channel, mm, +z toward a camera above the sample
   Image alpha;                   // 1 channel 0..1; empty: the sample has no holes
+  std::string height_unreliable_reason;  // non-empty: displacement written, flagged unreliable
   std::vector<ScalarMapChoice> scalars;
 };
 

@@ -33,7 +33,7 @@ StageOptions OptionsForPreset(Preset preset) {
       options.fit.samples_per_cluster = 96;
       options.fit.grid_samples_per_cluster = 24;
       options.fit.max_iterations = 30;
-      options.fit.refine_per_pixel = false;
+      options.fit.mode = fitting::FitMode::kClusters;
       break;
     case Preset::kBalanced:
       options.photometric_stereo.solver = PsSolver::kRobust;

@@ -11,6 +11,7 @@
 #include "core/logging.h"
 #include "core/system_stats.h"
 #include "pipeline/alpha_map.h"
+#include "pipeline/height_reliability.h"
 #include "pipeline/material_writer.h"
 #include "pipeline/stages.h"
 #include "u3m/image_io.h"
@@ -58,6 +59,7 @@ nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptio
                           {"schema", options.schema},
                           {"solver", options.solver.empty() ? "preset" : options.solver},
                           {"integrator", options.integrator.empty() ? "preset" : options.integrator},
+                          {"fit_mode", options.fit_mode.empty() ? "preset" : options.fit_mode},
                           {"dpi", prepared.calibration.grid.dpi()}};
   nlohmann::json cameras = nlohmann::json::array();
   for (const auto& camera : prepared.calibration.cameras) {
@@ -86,7 +88,10 @@ nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptio
   custom["exposures"] = exposures;
   custom["calibration"] = prepared.calibration.ToJson();
   nlohmann::json sources = nlohmann::json::object();
-  for (const auto& p : parameters) sources[p.name] = {{"source", ParameterSourceName(p.source)}, {"reason", p.reason}};
+  for (const auto& p : parameters) {
+    sources[p.name] = {{"source", ParameterSourceName(p.source)}, {"reason", p.reason}, {"reliable", p.reliable()}};
+    if (!p.reliable()) sources[p.name]["unreliable_reason"] = p.unreliable_reason;
+  }
   custom["parameter_sources"] = sources;
   custom["quality"] = quality;
   return custom;
@@ -112,6 +117,7 @@ bool ProcessOptions::Check(std::string* why) const {
   if (created && !ParseUtcTimestamp(*created)) return fail("--created must be a UTC time like 2026-11-22T10:00:00Z");
   if (!solver.empty() && solver != "ls" && solver != "robust") return fail("--solver must be ls or robust");
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
+  if (!fit_mode.empty() && fit_mode != "clusters" && fit_mode != "per-pixel") return fail("--fit-mode must be clusters or per-pixel");
   return true;
 }
 
@@ -152,7 +158,9 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     stages.integration.method = reconstruction::ParseIntegrator(options.integrator);
     stages.photometric_stereo.integration.method = stages.integration.method;
   }
+  if (!options.fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(options.fit_mode);
   report.options = {{"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
+                    {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
                     {"integrator", reconstruction::IntegratorName(stages.integration.method)}};
@@ -222,12 +230,14 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.normal.set_pitch_mm(stack.grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
+    maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       const fitting::MapReport& decision = fit.maps[p];
       ScalarMapChoice choice;
       choice.u3m_key = kU3mKeyOfFitParameter[p];
       choice.value = decision.value;
       choice.reason = decision.reason;
+      if (decision.measured && !decision.reliable) choice.unreliable_reason = decision.unreliable_reason;
       if (!decision.measured) {
         choice.source = ParameterSource::kDefault;
         if (choice.reason.empty()) choice.reason = "not constrained by this capture";
@@ -301,7 +311,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   const double write_start = StageClock();
   std::vector<ParameterRecord> decided;
   for (const SideMaps& side : request.sides) {
-    for (const auto& s : side.scalars) decided.push_back({side.side + "/" + s.u3m_key, s.source, s.reason, s.value, 0.0});
+    for (const auto& s : side.scalars) decided.push_back({side.side + "/" + s.u3m_key, s.source, s.reason, s.value, 0.0, s.unreliable_reason});
   }
   request.custom_section = CustomSection(prepared, options, decided, quality);
   const ScanMaterialResult written = WriteScanMaterial(request, job.out_dir, /*overwrite=*/true);

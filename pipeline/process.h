@@ -30,6 +30,7 @@ struct ProcessOptions {
   // Overrides of the preset's methods (empty = the preset's choice).
   std::string solver;                   // ls | robust
   std::string integrator;               // dct | robust
+  std::string fit_mode;                 // clusters | per-pixel (fitting::FitMode)
   // Returns false and says why when an option is out of range.
   bool Check(std::string* why) const;
 };

@@ -159,7 +159,9 @@ void WriteReportHtml(const RunReport& report, const std::filesystem::path& path)
     html << "<tr" << (p.source == ParameterSource::kDefault ? " class=\"skipped\"" : "") << "><td>"
          << EscapeHtml(p.name) << "</td><td>" << std::setprecision(4) << std::defaultfloat << p.value;
     if (p.uncertainty > 0) html << " &plusmn; " << p.uncertainty;
-    html << "</td><td>" << ParameterSourceName(p.source) << "</td><td>" << EscapeHtml(p.reason) << "</td></tr>\n";
+    html << "</td><td>" << ParameterSourceName(p.source) << (p.reliable() ? "" : ", UNRELIABLE") << "</td><td>"
+         << EscapeHtml(p.reason) << (p.reliable() ? "" : "; unreliable: " + EscapeHtml(p.unreliable_reason))
+         << "</td></tr>\n";
   }
   html << "</table>\n";
 

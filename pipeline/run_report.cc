@@ -32,11 +32,14 @@ nlohmann::json RunReportToJson(const RunReport& report) {
   }
   j["parameters"] = nlohmann::json::array();
   for (const auto& p : report.parameters) {
-    j["parameters"].push_back({{"name", p.name},
-                               {"source", ParameterSourceName(p.source)},
-                               {"reason", p.reason},
-                               {"value", p.value},
-                               {"uncertainty", p.uncertainty}});
+    nlohmann::json record = {{"name", p.name},
+                             {"source", ParameterSourceName(p.source)},
+                             {"reason", p.reason},
+                             {"value", p.value},
+                             {"uncertainty", p.uncertainty},
+                             {"reliable", p.reliable()}};
+    if (!p.reliable()) record["unreliable_reason"] = p.unreliable_reason;
+    j["parameters"].push_back(std::move(record));
   }
   j["calibration"] = report.calibration;
   j["quality"] = report.quality;

@@ -36,6 +36,10 @@ struct ParameterRecord {
   std::string reason;    // why, in words an operator understands
   double value = 0.0;    // the constant written (mean of the map when there is one)
   double uncertainty = 0.0;  // one standard deviation where the fit gives one, else 0
+  // Empty: nothing says the value is off. Else the value is written but flagged unreliable, and this
+  // says which of the run's own evidence flags it (docs/fitting.md, "Reliable or not").
+  std::string unreliable_reason;
+  bool reliable() const { return unreliable_reason.empty(); }
 };
 
 // An image shown in the report as a thumbnail.

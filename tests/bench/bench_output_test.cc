@@ -47,7 +47,7 @@ std::vector<BenchRow> FakeRows() {
   for (const char* preset : {"fast", "balanced", "best"}) {
     for (const char* rig : {"distant", "near"}) {
       BenchRow r;
-      r.c = {"plain", rig, 48, 0, true, preset, "", "", "matrix"};
+      r.c = {"plain", rig, 48, 0, true, preset, "", "", "matrix", ""};
       r.lights_used = 16;
       r.megapixels = 0.0023;
       r.solver_used = "robust";
@@ -66,7 +66,7 @@ std::vector<BenchRow> FakeRows() {
     }
   }
   BenchRow failed;
-  failed.c = {"velvet", "near", 48, 0, false, "fast", "ls", "", "methods"};
+  failed.c = {"velvet", "near", 48, 0, false, "fast", "ls", "", "methods", ""};
   failed.status = "failed";
   failed.error = "exit 2: error, with \"quotes\"";
   rows.push_back(failed);
@@ -154,13 +154,14 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsAndNeedsLess) {
   BenchOptions options;
   options.quick = true;
   const auto cases = BenchMatrix(options);
-  std::set<std::string> presets, rigs, solvers, integrators, ids;
+  std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
   for (const auto& c : cases) {
     presets.insert(c.preset);
     rigs.insert(c.rig);
     if (!c.solver.empty()) solvers.insert(c.solver);
     if (!c.integrator.empty()) integrators.insert(c.integrator);
+    if (!c.fit_mode.empty()) fit_modes.insert(c.fit_mode);
     without_calibration = without_calibration || !c.calibration_frames;
     EXPECT_TRUE(ids.insert(c.RunId()).second) << "duplicate run " << c.RunId();
   }
@@ -168,6 +169,7 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsAndNeedsLess) {
   EXPECT_EQ(rigs, (std::set<std::string>{"distant", "near", "oblique"}));
   EXPECT_EQ(solvers, std::set<std::string>{"ls"});
   EXPECT_EQ(integrators, std::set<std::string>{"robust"});
+  EXPECT_EQ(fit_modes, std::set<std::string>{"clusters"}) << "clusters against the balanced run's per-pixel fit";
   EXPECT_TRUE(without_calibration);
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());

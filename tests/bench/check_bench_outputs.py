@@ -11,11 +11,11 @@ from pathlib import Path
 
 EXPECTED_COLUMNS = [
     "group", "scene", "rig", "size_px", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
-    "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
+    "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
     "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "error"]
+    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "unreliable", "error"]
 PLOTS = ["error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"]
 
 
@@ -49,10 +49,13 @@ def main():
         fail("rigs missing")
     if {r["solver"] for r in records} != {"ls", "robust"} or {r["integrator"] for r in records} != {"dct", "robust"}:
         fail("method comparison missing")
+    if {r["fit_mode"] for r in records} != {"clusters", "per-pixel"}:
+        fail("fit mode comparison missing")
     if not any(r["calibration_frames"] == "no" for r in records):
         fail("no capture without calibration frames")
     md = (out / "bench.md").read_text()
-    for heading in ("## Every run", "## Presets", "## Methods on the same capture", "## Scenes that need less"):
+    for heading in ("## Every run", "## Presets", "## Methods on the same capture",
+                    "### Fit: clusters vs per-pixel", "## Scenes that need less"):
         if heading not in md:
             fail(f"bench.md lacks {heading}")
     for plot in PLOTS:

@@ -63,8 +63,10 @@ class EvaluateTest : public ::testing::Test {
     // Every parameter as its truth map, except: specular as a constant (its truth mean), sheen
     // "not measured" unless sheen_measured.
     nlohmann::json parameters = nlohmann::json::array();
+    // specular is flagged unreliable, as the pipeline's report does it (docs/fitting.md).
     parameters.push_back({{"name", "front/specular_value"}, {"source", "measured (uniform: constant)"},
-                          {"value", scene_.specular.ChannelMean(0)}});
+                          {"value", scene_.specular.ChannelMean(0)}, {"reliable", false},
+                          {"unreliable_reason", "test"}});
     parameters.push_back({{"name", "front/sheen_value"},
                           {"source", sheen_measured ? "measured" : "not measured (U3M default)"}, {"value", 0.0}});
     const nlohmann::json report = {
@@ -149,6 +151,15 @@ TEST_F(EvaluateTest, NotMeasuredParametersAreNotErrors) {
   const nlohmann::json j = EvaluationToJson(e);
   EXPECT_TRUE(j["parameters"][3]["mean_abs_error"].is_null());
   EXPECT_NE(EvaluationToText(e).find("not measured"), std::string::npos);
+}
+
+TEST_F(EvaluateTest, ReportsWhichValuesTheRunFlaggedUnreliable) {
+  const Evaluation e = Evaluate(WriteOutput(0.0, 0.0), root_ / "truth");
+  ASSERT_EQ(e.parameters[1].name, "specular");
+  EXPECT_FALSE(e.parameters[1].reliable);
+  EXPECT_TRUE(e.parameters[0].reliable) << "roughness: no verdict in the report means not flagged";
+  EXPECT_FALSE(EvaluationToJson(e)["parameters"][1]["reliable"].get<bool>());
+  EXPECT_NE(EvaluationToText(e).find("flagged unreliable"), std::string::npos);
 }
 
 TEST_F(EvaluateTest, ResamplesTruthOntoAFinerOutputGrid) {

@@ -51,6 +51,10 @@ struct SceneSpec {
   double point_light_distance_mm = 0.0;
   RenderModel model = RenderModel::kPrincipled;
   MaterialFn material;
+  // Fibre direction of the render (degrees from the fit's tangent convention, world +x projected,
+  // turned about the normal) per pixel; empty: 0 everywhere, the fit's own convention. A twill's
+  // warp runs at 90 degrees to its weft.
+  std::function<double(int col, int row)> tangent_deg;
 };
 
 // Overhead rig: 16 lights on four rings (elevation 15, 35, 55, 75 degrees).
@@ -126,7 +130,9 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
       const Eigen::Vector3d point(p.x(), p.y(), h);
       const Eigen::Vector3d n(scene.geometry.normals.at(0, row, col), scene.geometry.normals.at(1, row, col),
                               scene.geometry.normals.at(2, row, col));
-      const Eigen::Vector3d t = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
+      const Eigen::Vector3d t0 = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
+      const double turn = spec.tangent_deg ? spec.tangent_deg(col, row) * kDegToRad : 0.0;
+      const Eigen::Vector3d t = std::cos(turn) * t0 + std::sin(turn) * n.cross(t0);
       const Eigen::Vector3d b = n.cross(t);
       const Eigen::Vector3d lw = stack.lights[light].DirectionFrom(point);
       const double irradiance = stack.lights[light].RelativeIrradianceAt(point);

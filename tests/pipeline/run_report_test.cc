@@ -24,8 +24,8 @@ RunReport ExampleReport() {
   report.preset = "balanced";
   report.steps.push_back({"colour correction", false, "no chart frames", 0.0});
   report.steps.push_back({"photometric stereo", true, "", 1.25});
-  report.parameters.push_back({"sheen", ParameterSource::kDefault, "overhead camera only", 0.0, 0.0});
-  report.parameters.push_back({"roughness", ParameterSource::kMeasured, "", 0.62, 0.01});
+  report.parameters.push_back({"sheen", ParameterSource::kDefault, "overhead camera only", 0.0, 0.0, ""});
+  report.parameters.push_back({"roughness", ParameterSource::kMeasured, "", 0.62, 0.01, ""});
   report.quality["mean_confidence"] = 0.93;
   Image gradient(8, 4, 1);
   for (int x = 0; x < 8; ++x) gradient.at(0, 0, x) = static_cast<float>(x);
