@@ -138,15 +138,40 @@ RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGr
 
 namespace {
 
-void RemapPlane(const cv::Mat& source, cv::Mat destination, const RectificationMap& map, double prefilter_sigma) {
-  const cv::Mat map_x = internal::PlaneView(map.map, 0), map_y = internal::PlaneView(map.map, 1);
-  if (prefilter_sigma > 0.0) {
-    cv::Mat blurred;
-    cv::GaussianBlur(source, blurred, cv::Size(0, 0), prefilter_sigma, prefilter_sigma, cv::BORDER_REFLECT);
-    cv::remap(blurred, destination, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
-  } else {
-    cv::remap(source, destination, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
+int CvInterpolation(RectifyInterpolation interpolation) {
+  switch (interpolation) {
+    case RectifyInterpolation::kLinear: return cv::INTER_LINEAR;
+    case RectifyInterpolation::kCubic: return cv::INTER_CUBIC;
+    case RectifyInterpolation::kLanczos4: return cv::INTER_LANCZOS4;
   }
+  return cv::INTER_LINEAR;
+}
+
+// Camera pixels a kernel reaches beyond the 2x2 of bilinear interpolation, on each side.
+int KernelReach(RectifyInterpolation interpolation) {
+  switch (interpolation) {
+    case RectifyInterpolation::kLinear: return 0;
+    case RectifyInterpolation::kCubic: return 1;
+    case RectifyInterpolation::kLanczos4: return 3;
+  }
+  return 0;
+}
+
+void RemapPlane(const cv::Mat& source, cv::Mat destination, const RectificationMap& map, double prefilter_sigma,
+                RectifyInterpolation interpolation) {
+  const cv::Mat map_x = internal::PlaneView(map.map, 0), map_y = internal::PlaneView(map.map, 1);
+  cv::Mat blurred;
+  if (prefilter_sigma > 0.0) cv::GaussianBlur(source, blurred, cv::Size(0, 0), prefilter_sigma, prefilter_sigma, cv::BORDER_REFLECT);
+  const cv::Mat& input = prefilter_sigma > 0.0 ? blurred : source;
+  if (interpolation == RectifyInterpolation::kLinear) {
+    // In-view grid pixels ([0, W-1] x [0, H-1]) never reach beyond the frame with bilinear weights.
+    cv::remap(input, destination, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
+    return;
+  }
+  // Wider kernels reach past the frame's edge from in-view pixels: repeat the edge there, and
+  // clamp the ringing at 0.
+  cv::remap(input, destination, map_x, map_y, CvInterpolation(interpolation), cv::BORDER_REPLICATE);
+  cv::max(destination, 0.0, destination);
 }
 
 double PrefilterSigma(const RectificationMap& map) {
@@ -161,7 +186,7 @@ Image RectifyImage(const Image& image, const RectificationMap& map) {
   Image out(map.grid.width, map.grid.height, image.channels(), 0.0f, map.grid.pitch_mm);
   const double sigma = PrefilterSigma(map);
   for (int c = 0; c < image.channels(); ++c) {
-    RemapPlane(internal::PlaneView(image, c), internal::PlaneView(out, c), map, sigma);
+    RemapPlane(internal::PlaneView(image, c), internal::PlaneView(out, c), map, sigma, map.interpolation);
   }
   return out;
 }
@@ -178,9 +203,13 @@ RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map) {
     cv::Mat saturated(frame.rgb.height(), frame.rgb.width(), CV_8U, const_cast<std::uint8_t*>(frame.saturated.data()));
     cv::Mat saturated_f;
     saturated.convertTo(saturated_f, CV_32F);
+    // Wider kernels: grow the mask by their extra reach, then the bilinear footprint finds it.
+    if (const int reach = KernelReach(map.interpolation); reach > 0) {
+      cv::dilate(saturated_f, saturated_f, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1)));
+    }
     cv::Mat on_grid(map.grid.height, map.grid.width, CV_32F);
     const double sigma = PrefilterSigma(map);
-    RemapPlane(saturated_f, on_grid, map, sigma > 0.0 ? sigma : 0.0);
+    RemapPlane(saturated_f, on_grid, map, sigma > 0.0 ? sigma : 0.0, RectifyInterpolation::kLinear);
     for (int row = 0; row < on_grid.rows; ++row) {
       const float* s = on_grid.ptr<float>(row);
       for (int col = 0; col < on_grid.cols; ++col) {

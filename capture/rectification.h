@@ -29,12 +29,23 @@ MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec&
 // The rectangle [x0, y0, x1, y1] (mm, z = 0) that every camera sees whole.
 std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras);
 
+// How camera pixels are interpolated at a grid pixel's centre (cv::remap). Results are clamped
+// at 0 (the ringing of the cubic and Lanczos kernels next to dark edges cannot make light
+// negative); the saturation flag covers every camera pixel a kernel reaches.
+enum class RectifyInterpolation {
+  kLinear,    // bilinear, 2x2 camera pixels
+  kCubic,     // bicubic (a = -0.75), 4x4
+  kLanczos4,  // Lanczos, 8x8
+};
+inline constexpr RectifyInterpolation kDefaultRectifyInterpolation = RectifyInterpolation::kCubic;
+
 struct RectificationMap {
   MetricGrid grid;
   Image map;                              // 2 planes: camera x and y (px) of each grid pixel centre
   std::vector<std::uint8_t> out_of_view;  // grid size, 1 = the camera does not see the point
   double camera_px_per_grid_px = 1.0;     // at the grid's centre; > 1 means the grid is coarser
   bool crop_and_scale = false;            // straight-down camera without distortion (an affine map)
+  RectifyInterpolation interpolation = kDefaultRectifyInterpolation;
 };
 
 // `height_mm`: the plane the map is computed for (0 = the sample plane).
@@ -45,8 +56,8 @@ struct RectifiedFrame {
   std::vector<std::uint8_t> flags;    // ObservationFlag bits (kSaturated, kOutOfView)
 };
 
-// Resamples `frame` (camera pixels) onto the map's grid (bilinear; when the grid is coarser than
-// the camera by more than 1.5x, a Gaussian pre-filter against aliasing).
+// Resamples `frame` (camera pixels) onto the map's grid (map.interpolation; when the grid is
+// coarser than the camera by more than 1.5x, a Gaussian pre-filter against aliasing).
 RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map);
 // The same for any image (all channels), without flags.
 Image RectifyImage(const Image& image, const RectificationMap& map);

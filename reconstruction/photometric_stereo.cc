@@ -39,8 +39,16 @@ double QuantileToSigma(double q) {
   return cached_factor;
 }
 
+std::string DiffuseModelName(DiffuseModel model) { return model == DiffuseModel::kLambert ? "lambert" : "burley"; }
+
+DiffuseModel ParseDiffuseModel(const std::string& name) {
+  if (name == "lambert") return DiffuseModel::kLambert;
+  if (name == "burley") return DiffuseModel::kBurley;
+  throw std::invalid_argument("diffuse model must be lambert or burley, got '" + name + "'");
+}
+
 bool PhotometricStereoOptions::Check() const {
-  return view >= -1 && dark_shading >= 0.0 && band_low_fraction >= 0.0 && band_high_fraction >= 0.0 &&
+  return view >= -1 && diffuse_roughness <= 1.0 && diffuse_iterations >= 0 && dark_shading >= 0.0 && band_low_fraction >= 0.0 && band_high_fraction >= 0.0 &&
          band_low_fraction + band_high_fraction < 1.0 && residual_quantile > 0.0 && residual_quantile < 1.0 && irls_iterations >= 0 && min_residual_fraction > 0.0 &&
          good_condition >= 1.0 && max_condition > good_condition && max_reported_condition >= max_condition &&
          reliable_albedo > 0.0 && min_normal_z > 0.0 && min_normal_z < 1.0 && residual_tolerance > 0.0 &&
@@ -60,6 +68,12 @@ constexpr double kMaxAlbedo = 1e6;
 // Smallest cosine the albedo of a regularised pixel assumes for its observations (84 deg).
 constexpr double kRegularisedCosFloor = 0.1;
 
+double SchlickWeight(double c) {
+  const double m = std::clamp(1.0 - c, 0.0, 1.0);
+  const double m2 = m * m;
+  return m2 * m2 * m;
+}
+
 // Per-pixel state bits, counted into the result after the parallel passes.
 enum PixelState : std::uint8_t {
   kDark = 1u << 0,
@@ -75,7 +89,11 @@ constexpr std::uint8_t kNeedsNeighbours = kDark | kIllConditioned | kLowAlbedo |
 // One observation at the current pixel. Lives in a per-chunk scratch array: no per-pixel allocation.
 struct PixelObservation {
   Vector3d s;           // E * l, light vector scaled by relative irradiance
-  Vector3d rgb;         // observed linear RGB
+  Vector3d l;           // unit direction toward the light
+  Vector3d v;           // unit direction toward the camera
+  Vector3d raw_rgb;     // observed linear RGB
+  Vector3d rgb;         // raw_rgb divided by the diffuse lobe's factor (kBurley), else raw_rgb
+  double fd90_minus_1 = 0.0;  // kBurley: fd90 - 1 of this light and view (independent of the normal)
   double grey = 0.0;    // mean of rgb
   double inv_e = 0.0;   // 1 / E: residuals * inv_e are in shading units (rho / pi * cos)
   double weight = 0.0;  // current IRLS weight (0 = not used)
@@ -166,6 +184,23 @@ class Solver {
   }
 
   bool has_point_lights() const { return has_point_lights_; }
+  // The diffuse lobe the next Gather uses: Burley's with roughness r, or Lambert's (r < 0).
+  void set_roughness(double r) { roughness_ = r; }
+  double roughness() const { return roughness_; }
+  bool burley() const { return options_.diffuse_model == DiffuseModel::kBurley && roughness_ >= 0.0; }
+
+  // kBurley: divides every observation by the diffuse lobe's factor at normal n, relative to
+  // Lambert's law: (1 + (fd90 - 1) SW(n.l)) (1 + (fd90 - 1) SW(n.v)).
+  void ApplyDiffuseModel(Scratch& scratch, const Vector3d& n) const {
+    for (PixelObservation& o : scratch.obs) {
+      if (!o.candidate) continue;
+      const double fl = 1.0 + o.fd90_minus_1 * SchlickWeight(std::max(0.0, n.dot(o.l)));
+      const double fv = 1.0 + o.fd90_minus_1 * SchlickWeight(std::max(0.0, n.dot(o.v)));
+      const double factor = std::max(fl * fv, 1e-3);  // fd90 >= 0.5: the factor is >= 0.25
+      o.rgb = o.raw_rgb / factor;
+      o.grey = o.rgb.mean();
+    }
+  }
   std::size_t observation_count() const { return selected_.size(); }
 
   // Fills scratch.obs for pixel (r, c) at height_mm and returns the number of observations above
@@ -197,7 +232,15 @@ class Solver {
       const int ch = ob.rgb.channels();
       for (int i = 0; i < 3; ++i) o.rgb(i) = ob.rgb.data()[static_cast<std::size_t>(ch == 3 ? i : 0) * g.width * g.height + pix];
       if (!o.rgb.allFinite()) continue;
-      o.s = light.DirectionFrom(x) * e;
+      o.raw_rgb = o.rgb;
+      o.l = light.DirectionFrom(x);
+      o.s = o.l * e;
+      if (burley()) {
+        const Vector3d centre = stack_.views.empty() ? Vector3d(0, 0, 1000) : stack_.views[ob.view].centre_in_world_mm;
+        o.v = (centre - x).normalized();
+        const double cos_d = std::clamp(o.l.dot((o.l + o.v).normalized()), 0.0, 1.0);
+        o.fd90_minus_1 = 2.0 * roughness_ * cos_d * cos_d - 0.5;
+      }
       o.inv_e = 1.0 / e;
       o.grey = o.rgb.mean();
       const bool is_bright = o.grey * o.inv_e > options_.dark_shading;
@@ -374,7 +417,49 @@ class Solver {
   const PhotometricStereoOptions& options_;
   std::vector<int> selected_;
   bool has_point_lights_ = false;
+  double roughness_ = -1.0;
 };
+
+// Steepest normal (n_z, i.e. cos of the view angle for a camera above) re-weighted for the Burley lobe.
+constexpr double kBurleyMinNormalZ = 0.3;
+
+// Weigh + Finish, then (kBurley) the re-weighting rounds: each divides the observations by the
+// diffuse lobe's factor at the last normal and solves again. `est.state` on entry is kept as the
+// base of every round's flags.
+void SolvePixel(const Solver& solver, const PhotometricStereoOptions& options, Scratch& scratch, PixelSystem& sys,
+                const Vector3d* prior, PixelEstimate& est, Vector3d& albedo, bool low_confidence = false) {
+  const std::uint8_t base_state = est.state;
+  solver.Weigh(scratch, sys);
+  solver.Finish(scratch, sys, prior, est, albedo, low_confidence);
+  if (!solver.burley()) return;
+  // The lobe's view factor changes fast near grazing view, where the re-weighting need not
+  // converge; such pixels (and those the data cannot place) keep Lambert's solve.
+  if ((est.state & (kClamped | kIllConditioned)) != 0 || est.normal.z() < kBurleyMinNormalZ) return;
+  for (int it = 0; it < options.diffuse_iterations; ++it) {
+    solver.ApplyDiffuseModel(scratch, est.normal);
+    est.state = base_state;
+    solver.Weigh(scratch, sys);
+    solver.Finish(scratch, sys, prior, est, albedo, low_confidence);
+  }
+}
+
+// kBurley: mean squared residual, in the observations' own units (raw, not re-weighted) relative
+// to the albedo, of the pixel's weighted fit: what the roughness estimate minimises.
+double RawRelativeResidual2(const std::vector<PixelObservation>& obs, const Vector3d& n, const Vector3d& rho) {
+  const double bg = rho.mean() / std::numbers::pi;
+  if (!(bg > 0.0)) return -1.0;
+  double s2 = 0.0, ws = 0.0;
+  for (const auto& o : obs) {
+    if (o.weight <= 0.0) continue;
+    const double cos_l = o.s.dot(n);
+    const double factor = (1.0 + o.fd90_minus_1 * SchlickWeight(std::max(0.0, n.dot(o.l)))) *
+                          (1.0 + o.fd90_minus_1 * SchlickWeight(std::max(0.0, n.dot(o.v))));
+    const double u = (o.raw_rgb.mean() - factor * bg * std::max(0.0, cos_l)) * o.inv_e;
+    s2 += o.weight * u * u;
+    ws += o.weight;
+  }
+  return ws > 0.0 ? s2 / ws / (bg * bg) : -1.0;
+}
 
 // Prior normal for the pixels that need one, from their reliable neighbours: the weighted mean
 // over the 3x3 neighbourhood, else push-pull over a pyramid (2x2 sums down, blend back up), +z when
@@ -510,8 +595,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
           est.state = kDark | kIllConditioned;
           est.condition = options.max_reported_condition;
         } else {
-          solver.Weigh(scratch, sys);
-          solver.Finish(scratch, sys, nullptr, est, albedo);
+          SolvePixel(solver, options, scratch, sys, nullptr, est, albedo);
           if (est.confidence < options.regularise_below_confidence) est.state |= kLowConfidence;
         }
         store(i, est, albedo);
@@ -546,8 +630,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
             est.condition = options.max_reported_condition;
           } else {
             solver.Gather(static_cast<int>(r), c, height_at(i), scratch);
-            solver.Weigh(scratch, sys);
-            solver.Finish(scratch, sys, &p, est, albedo, (state[i] & kLowConfidence) != 0);
+            SolvePixel(solver, options, scratch, sys, &p, est, albedo, (state[i] & kLowConfidence) != 0);
           }
           store(i, est, albedo);
         }
@@ -575,15 +658,86 @@ double MeanAngleDeg(const Image& a, const Image& b) {
   return n > 0 ? sum / n * 180.0 / std::numbers::pi : 0.0;
 }
 
+// kBurley: the diffuse roughness that leaves the least residual, over a sample of at most
+// ~kRoughnessSamplePixels pixels at height `height_mm`: a grid over [0, 1], then a parabola
+// through the best grid point and its neighbours; -1 (Lambert's law) when that fits better still
+// (a matte surface that is not Principled). Sums run in pixel order (thread-count independent).
+constexpr int kRoughnessSamplePixels = 4096;
+constexpr int kRoughnessGridSteps = 5;  // r = 0, 0.2, ..., 1
+
+double EstimateDiffuseRoughness(Solver& solver, const Stack& stack, const PhotometricStereoOptions& options,
+                                double height_mm) {
+  const int w = stack.grid.width, h = stack.grid.height;
+  const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(w) * h / kRoughnessSamplePixels)));
+  const int rows = (h + stride - 1) / stride, cols = (w + stride - 1) / stride;
+  // Lambert's solve picks the pixels every candidate is judged on (well placed, not too steep) and
+  // is the last candidate; a pixel a candidate cannot solve counts with Lambert's residual.
+  std::vector<double> lambert(static_cast<std::size_t>(rows) * cols, -1.0), per_pixel(lambert.size());
+  auto residuals = [&](std::vector<double>& out, bool first) {
+    ParallelFor(rows, [&](std::size_t r0, std::size_t r1) {
+      Scratch scratch(solver.observation_count());
+      PixelSystem sys;
+      for (std::size_t rr = r0; rr < r1; ++rr)
+        for (int cc = 0; cc < cols; ++cc) {
+          const std::size_t i = rr * cols + cc;
+          out[i] = -1.0;
+          if (!first && lambert[i] < 0.0) continue;
+          const int r = static_cast<int>(rr) * stride, c = cc * stride;
+          if (solver.Gather(r, c, height_mm, scratch) < 4) continue;
+          PixelEstimate est;
+          Vector3d albedo;
+          SolvePixel(solver, options, scratch, sys, nullptr, est, albedo);
+          if (first && (est.confidence < options.regularise_below_confidence || (est.state & kClamped) != 0 ||
+                        est.normal.z() < kBurleyMinNormalZ)) {
+            continue;
+          }
+          out[i] = RawRelativeResidual2(scratch.obs, est.normal, albedo);
+        }
+    });
+  };
+  solver.set_roughness(-1.0);
+  residuals(lambert, true);
+  std::vector<double> cost(kRoughnessGridSteps + 2, 0.0);  // [0, steps]: Burley r = g / steps; last: Lambert
+  for (double v : lambert) cost.back() += std::max(0.0, v);
+  for (int g = 0; g <= kRoughnessGridSteps; ++g) {
+    solver.set_roughness(static_cast<double>(g) / kRoughnessGridSteps);
+    residuals(per_pixel, false);
+    for (std::size_t i = 0; i < per_pixel.size(); ++i) {
+      if (lambert[i] >= 0.0) cost[g] += per_pixel[i] >= 0.0 ? per_pixel[i] : lambert[i];
+    }
+  }
+  const int best = static_cast<int>(std::min_element(cost.begin(), cost.end() - 1) - cost.begin());
+  if (cost.back() <= cost[best]) return -1.0;
+  const double step = 1.0 / kRoughnessGridSteps;
+  double r = best * step;
+  if (best > 0 && best < kRoughnessGridSteps) {
+    const double cm = cost[best - 1], c0 = cost[best], cp = cost[best + 1];
+    const double curvature = cm - 2.0 * c0 + cp;
+    if (curvature > 0.0) r -= 0.5 * step * (cp - cm) / curvature;
+  }
+  return std::clamp(r, 0.0, 1.0);
+}
+
 }  // namespace
 
 PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const PhotometricStereoOptions& options,
                                              const ProgressCallback& progress) {
   if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
   CheckStack(stack, options);
-  const Solver solver(stack, options);
+  Solver solver(stack, options);
   const int w = stack.grid.width, h = stack.grid.height;
   ReportProgress(progress, "photometric stereo", 0.0);
+  if (options.diffuse_model == DiffuseModel::kBurley) {
+    solver.set_roughness(options.diffuse_roughness >= 0.0
+                             ? options.diffuse_roughness
+                             : EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm));
+    if (solver.burley()) {
+      LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << solver.roughness()
+                << (options.diffuse_roughness >= 0.0 ? " (given)" : " (least residual)");
+    } else {
+      LogInfo() << "photometric stereo: Lambert's law fits better than any Burley diffuse lobe";
+    }
+  }
   // Start on the anchor plane: every pixel at the mean height.
   const Image start(w, h, 1, static_cast<float>(options.integration.mean_height_mm), stack.grid.pitch_mm);
   PhotometricStereoResult result = SolveAt(solver, stack, options, start);
@@ -616,6 +770,7 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
                    << " rounds, normals still changing by " << result.last_normal_change_deg << " deg";
   }
   if (solver.has_point_lights() && result.height_mm.empty()) result.height_mm = start;
+  result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
   ReportProgress(progress, "photometric stereo", 1.0);
   return result;
 }

@@ -25,6 +25,19 @@
 
 namespace u3mscan::reconstruction {
 
+// The diffuse reflectance the solve assumes. Fabric is rough and the product's BRDF is the
+// Principled one, whose diffuse lobe (Burley 2012) is rho / pi * (1 + (fd90 - 1) SW(cos_l)) *
+// (1 + (fd90 - 1) SW(cos_v)) with SW(c) = (1 - c)^5, fd90 = 0.5 + 2 r cos_d^2 (r roughness, cos_d
+// between light and half vector): at r = 1 a facet turned away from a 30 deg light looks up to
+// 60 % brighter than Lambert's law says, and a Lambertian solve flattens every normal by ~10 %.
+enum class DiffuseModel {
+  kLambert,  // rho / pi * cos: the classic model
+  kBurley,   // the Principled diffuse lobe above, by re-weighting: divide each observation by the
+             // lobe's factor at the current normal and solve again (diffuse_iterations rounds)
+};
+std::string DiffuseModelName(DiffuseModel model);
+DiffuseModel ParseDiffuseModel(const std::string& name);  // "lambert" / "burley"
+
 enum class PsSolver {
   kLeastSquares,  // every unflagged observation, equal weights: the classic baseline
   kRobust,        // shadows, saturation and highlights as outliers: band selection, then IRLS
@@ -39,6 +52,15 @@ struct PhotometricStereoOptions {
   // Observations of this view only (index into Stack::views); -1 = every view (a Lambertian
   // surface looks the same from each).
   int view = -1;
+
+  DiffuseModel diffuse_model = DiffuseModel::kBurley;
+  // kBurley: the roughness r of the lobe; < 0 = estimated from the data (the r of a grid over
+  // [0, 1], refined by a parabola, whose solve leaves the least residual on a sample of pixels;
+  // Lambert's law instead when it leaves less).
+  double diffuse_roughness = -1.0;
+  // kBurley: re-weighting rounds after the first solve (the factor changes slowly with n: the
+  // normal moves by < 0.01 deg after 3 rounds).
+  int diffuse_iterations = 3;
 
   // Shading rgb / E (= rho / pi * cos) at or below this is no data: shadow or black. Units of
   // reflectance / pi; 1e-4 is ~0.03 % reflectance at normal incidence.
@@ -104,6 +126,7 @@ struct PhotometricStereoResult {
   long long clamped_normal_pixels = 0;   // n_z clamped to min_normal_z
   long long regularised_pixels = 0;      // normal pulled toward the neighbours
   int near_iterations = 0;               // height refinement rounds run (0 for distant lights)
+  double diffuse_roughness = -1.0;       // the Burley roughness used (given or estimated); -1: Lambert's law
   double last_normal_change_deg = 0.0;   // mean normal change of the last refinement round
 };
 

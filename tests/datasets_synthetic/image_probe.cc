@@ -2,7 +2,7 @@
 // statistics of images over a central crop and, for two images, their difference and correlation.
 // Used to measure render contrast against truth (docs/synthetic-scanner.md).
 // Build: cmake --build build --target synth_image_probe
-// Run:   build/tests/datasets_synthetic/synth_image_probe A.exr [B.exr] [--crop N]
+// Run:   build/tests/datasets_synthetic/synth_image_probe A.exr [B.exr] [--crop N] [--shift DX DY]
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -17,9 +17,13 @@ using namespace u3mscan;
 int main(int argc, char** argv) {
   std::string a_path, b_path;
   int crop = 0;
+  double shift_x = 0.0, shift_y = 0.0;  // B is read at (col + shift_x, row + shift_y), bilinear
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--crop") && i + 1 < argc) {
       crop = std::atoi(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--shift") && i + 2 < argc) {
+      shift_x = std::atof(argv[++i]);
+      shift_y = std::atof(argv[++i]);
     } else if (a_path.empty()) {
       a_path = argv[i];
     } else {
@@ -45,7 +49,11 @@ int main(int argc, char** argv) {
         const double x = a.at(c, r, col);
         sa += x, saa += x * x;
         if (!b.empty()) {
-          const double y = b.at(c, r, col);
+          const double fx = col + shift_x, fy = r + shift_y;
+          const int x0 = std::clamp(static_cast<int>(std::floor(fx)), 0, w - 2), y0 = std::clamp(static_cast<int>(std::floor(fy)), 0, h - 2);
+          const double ax = fx - x0, ay = fy - y0;
+          const double y = (1 - ay) * ((1 - ax) * b.at(c, y0, x0) + ax * b.at(c, y0, x0 + 1)) +
+                           ay * ((1 - ax) * b.at(c, y0 + 1, x0) + ax * b.at(c, y0 + 1, x0 + 1));
           sb += y, sbb += y * y, sab += x * y, sd2 += (x - y) * (x - y);
         }
       }
