@@ -397,13 +397,26 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
              << fit.delta_e_after_mean << " even after a 3x3 fit (at most " << options.max_chart_delta_e << " expected)";
         throw InputError(spec.file, "", what.str());
       }
-      const bool improves = fit.delta_e_after_mean < fit.delta_e_before_mean;
-      result.colour = {true, improves, spec.file, locator, fit};
+      ColourCalibration colour{true, false, "", spec.file, locator, ChartPatchPitchPx(*patches), fit};
+      std::ostringstream reason;
+      if (colour.patch_pitch_px < options.min_chart_patch_pitch_px) {
+        reason << "the chart is too small to trust: its patches are " << colour.patch_pitch_px
+               << " px apart in the frame, at least " << options.min_chart_patch_pitch_px
+               << " px needed to sample their centres clear of their edges";
+        record.Warn(spec.file + ": " + reason.str() + "; colour correction not applied (camera RGB used as is)");
+      } else if (!(fit.delta_e_cross_validated_mean < fit.delta_e_before_mean)) {
+        reason << "the camera's colours are already closer to the chart than the matrix brings patches it was not "
+                  "fitted to (leave-one-out CIEDE2000 mean "
+               << fit.delta_e_cross_validated_mean << ")";
+      }
+      colour.not_applied_reason = reason.str();
+      colour.applied = colour.not_applied_reason.empty();
+      result.colour = colour;
       std::ostringstream detail;
-      detail << "3x3 correction from " << spec.file << " (chart by " << locator << "): CIEDE2000 mean "
-             << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean << " after (max "
-             << fit.delta_e_after_max << ")"
-             << (improves ? "" : "; not applied: the camera's colours are already closer to the chart");
+      detail << "3x3 correction from " << spec.file << " (chart by " << locator << ", patches " << colour.patch_pitch_px
+             << " px apart): CIEDE2000 mean " << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean
+             << " after (max " << fit.delta_e_after_max << "), " << fit.delta_e_cross_validated_mean
+             << " leave-one-out" << (colour.applied ? "" : "; not applied: " + colour.not_applied_reason);
       record.Ran("colour", detail.str());
       return;
     } catch (const InputError& error) {
@@ -420,7 +433,7 @@ nlohmann::json Vector(const Eigen::Vector3d& v) { return nlohmann::json::array({
 bool CalibrationOptions::Check() const {
   return (side == "front" || side == "back") && (!dpi || *dpi > 0.0) && min_board_frames_for_intrinsics >= 3 &&
          min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0 &&
-         max_chart_delta_e > 0.0;
+         max_chart_delta_e > 0.0 && min_chart_patch_pitch_px >= 0.0;
 }
 
 LightModel LightModelFromSpec(const LightSpec& spec) {
@@ -523,11 +536,14 @@ nlohmann::json CalibrationResult::ToJson() const {
     out["colour"] = {{"frame", colour.frame},
                      {"applied", colour.applied},
                      {"locator", colour.locator},
+                     {"patch_pitch_px", colour.patch_pitch_px},
+                     {"ciede2000_cross_validated_mean", colour.fit.delta_e_cross_validated_mean},
                      {"matrix", matrix},
                      {"ciede2000_before_mean", colour.fit.delta_e_before_mean},
                      {"ciede2000_before_max", colour.fit.delta_e_before_max},
                      {"ciede2000_after_mean", colour.fit.delta_e_after_mean},
                      {"ciede2000_after_max", colour.fit.delta_e_after_max}};
+    if (!colour.applied) out["colour"]["not_applied_reason"] = colour.not_applied_reason;
   } else {
     out["colour"] = nullptr;
   }

@@ -93,11 +93,12 @@ struct TinyCapture {
     const double value = exposure_s * rho / kPi * light_directions[light].z();
     return Image(truth.width, truth.height, 3, static_cast<float>(value));
   }
-  Image Chart() const {
+  // The 24-patch chart centred on the origin, patches `pitch_mm` apart (10 mm: 40 camera px).
+  Image Chart(double pitch_mm = 10.0) const {
     const auto& reference = ClassicChartLinearSrgb();
     const double cos_theta = light_directions[0].z();
     return testing::RenderPlane(truth, [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
-      const double u = p.x() / 10.0 + 3.0, v = 2.0 - p.y() / 10.0;
+      const double u = p.x() / pitch_mm + 3.0, v = 2.0 - p.y() / pitch_mm;
       const int col = static_cast<int>(std::floor(u)), row = static_cast<int>(std::floor(v));
       Eigen::Vector3d rho = Eigen::Vector3d::Constant(0.03);
       if (col >= 0 && col < 6 && row >= 0 && row < 4 && u - col > 0.1 && u - col < 0.9 && v - row > 0.1 && v - row < 0.9) {
@@ -246,6 +247,53 @@ TEST(Calibrate, ChartNotFoundSkipsColourWithAMessageNamingTheFrame) {
   for (const auto& w : result.warnings) all += w + "\n";
   EXPECT_NE(all.find("chart.tif"), std::string::npos) << all;
   EXPECT_NE(all.find("colour chart"), std::string::npos) << all;
+}
+
+TEST(Calibrate, ChartTooSmallToTrustIsNotAppliedAndSaysSo) {
+  // Patches 1.75 mm = 7 camera px apart: below min_chart_patch_pitch_px (10). With a locator error
+  // of 1-2 px (what mcc showed on a 48 px frame) the outer patches' sampled centres reach their
+  // edges, the readings bend, and a 3x3 fit "corrects" the chart while it makes the fabric wrong
+  // (on the synthetic scanner: albedo dE 2.86 -> 6.41 at 48 px). Identity instead.
+  constexpr double kPitchMm = 1.75;
+  constexpr double kLayoutScale = 1.10;  // the layout's pitch 10 % too large: outer patches sampled off centre
+  TinyCapture capture = TinyCapture::Shared();
+  for (auto& [index, image] : capture.frames) {
+    if (capture.manifest.frames[index].role == FrameRole::kChart) {
+      image = capture.Chart(kPitchMm);
+      for (float& v : image.data()) v += static_cast<float>(kDark);
+    }
+  }
+  CalibrationOptions options = TestOptions();
+  options.chart_layout.patch_pitch_mm = kPitchMm * kLayoutScale;
+  const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), options);
+  ASSERT_TRUE(result.colour.fitted);
+  EXPECT_NEAR(result.colour.patch_pitch_px, kPitchMm * kLayoutScale / 0.25, 0.1);
+  EXPECT_FALSE(result.colour.applied);
+  EXPECT_NE(result.colour.not_applied_reason.find("too small to trust"), std::string::npos)
+      << result.colour.not_applied_reason;
+  std::string all;
+  for (const auto& w : result.warnings) all += w + "\n";
+  EXPECT_NE(all.find("chart.tif: the chart is too small to trust"), std::string::npos) << all;
+  const nlohmann::json json = result.ToJson();
+  EXPECT_EQ(json["colour"]["applied"], false);
+  EXPECT_TRUE(json["colour"]["not_applied_reason"].is_string());
+  // The stack keeps the camera's RGB: the fabric's reflectance comes through unchanged.
+  const Stack stack = BuildStack(capture.manifest, capture.Loader(), result, options);
+  const auto& observation = stack.observations.front();
+  const double expected = kFabricReflectance / kPi * capture.light_directions[observation.light].z();
+  const int row = stack.grid.height / 2, col = stack.grid.width / 2;
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(observation.rgb.at(c, row, col), expected, 0.01 * expected);
+  // The same chart without the size gate: the bent readings give a matrix far from identity.
+  options.min_chart_patch_pitch_px = 0.0;
+  const CalibrationResult ungated = Calibrate(capture.manifest, capture.Loader(), options);
+  std::cout << "measured: chart 7 px a patch, layout 10 % off: CIEDE2000 " << ungated.colour.fit.delta_e_before_mean
+            << " before, " << ungated.colour.fit.delta_e_after_mean << " after, "
+            << ungated.colour.fit.delta_e_cross_validated_mean << " leave-one-out; matrix diagonal "
+            << ungated.colour.fit.matrix.diagonal().transpose() << "\n";
+  constexpr double kBentMatrix = 0.1;  // |M - I| (Frobenius) of readings that reach the patches' edges
+  EXPECT_GT((ungated.colour.fit.matrix - Eigen::Matrix3d::Identity()).norm(), kBentMatrix);
+  EXPECT_FALSE(ungated.colour.applied);  // the leave-one-out gate catches this one too
+  EXPECT_EQ(ungated.colour.not_applied_reason.find("too small"), std::string::npos);
 }
 
 TEST(Calibrate, CaptureFolderOnDiskGivesTheSameCalibration) {
