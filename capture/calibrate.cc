@@ -9,6 +9,7 @@
 #include "capture/capture.h"
 #include "capture/flat_field.h"
 #include "capture/light_calibration.h"
+#include "capture/light_joint_fit.h"
 #include "capture/rectification.h"
 #include "core/error.h"
 #include "core/logging.h"
@@ -166,6 +167,11 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
 
 void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
                      const CalibrationResult& done, CalibrationResult& result, Recorder& record) {
+  struct Pending {
+    std::size_t light;  // index into result.lights
+    std::vector<SphereObservation> observations;
+  };
+  std::vector<Pending> pending;
   for (const LightSpec& spec : manifest.lights) {
     LightCalibration calibration;
     calibration.model = LightModelFromSpec(spec);
@@ -227,9 +233,31 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       result.lights.push_back(std::move(calibration));
       continue;
     }
-    const LightFit fit = calibration.model.type == LightType::kDirectional
-                             ? FitDirectionalLight(observations, calibration.model)
-                             : FitPointLight(observations, calibration.model, options.light_fit);
+    pending.push_back({result.lights.size(), std::move(observations)});
+    result.lights.push_back(std::move(calibration));
+  }
+  // Every light with sphere observations: fitted alone, or jointly with the others over shared
+  // sphere placements (light_joint_fit.h).
+  std::vector<LightFit> fits;
+  if (options.joint_light_fit && !pending.empty()) {
+    std::vector<JointLightInput> inputs;
+    for (auto& p : pending) inputs.push_back({result.lights[p.light].model, p.observations});
+    JointLightFit joint = FitLightsJointly(inputs, options.light_fit);
+    fits = std::move(joint.lights);
+    std::ostringstream detail;
+    detail << pending.size() << " light(s) and " << joint.placements << " sphere placement(s) fitted jointly, centres moved "
+           << joint.centre_shift_rms_mm << " mm RMS from their frames' mean" << (joint.converged ? "" : " (not converged)");
+    record.Ran("lights jointly", detail.str());
+  } else {
+    for (auto& p : pending) {
+      const LightModel& start = result.lights[p.light].model;
+      fits.push_back(start.type == LightType::kDirectional ? FitDirectionalLight(p.observations, start)
+                                                           : FitPointLight(p.observations, start, options.light_fit));
+    }
+  }
+  for (std::size_t k = 0; k < pending.size(); ++k) {
+    const LightFit& fit = fits[k];
+    LightCalibration& calibration = result.lights[pending[k].light];
     calibration.model = fit.model;
     calibration.source = "mirror sphere";
     calibration.placements = fit.placements;
@@ -244,8 +272,7 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
     }
     detail << " from " << fit.placements << " sphere placement(s), residual " << fit.residual << " "
            << fit.residual_unit << (fit.note.empty() ? "" : "; " + fit.note);
-    record.Ran(step, detail.str());
-    result.lights.push_back(std::move(calibration));
+    record.Ran("light " + calibration.model.id, detail.str());
   }
 }
 

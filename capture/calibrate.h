@@ -57,6 +57,9 @@ struct CalibrationOptions {
   // the height of the manifest's centre_mm when it gives one; false: the height is fitted too.
   bool sphere_on_known_height = true;
   LightFitOptions light_fit;             // highlight accuracy, manifest prior for point lights
+  // Fit all lights and the sphere placements they share together (light_joint_fit.h); false:
+  // each light alone on its own frames' sphere centres.
+  bool joint_light_fit = true;
   bool Check() const;
 };
 

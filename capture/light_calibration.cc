@@ -274,6 +274,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   observation.highlight_point_in_world_mm = hit;
   observation.apparent_radius_px = radius_px;
   observation.highlight_area_px = area;
+  observation.camera_centre_in_world_mm = camera.CentreInWorld();
   observation.reflected_in_world = (2.0 * normal.dot(to_camera) * normal - to_camera).normalized();
   return observation;
 }

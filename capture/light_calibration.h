@@ -29,6 +29,7 @@ struct SphereObservation {
   Eigen::Vector3d reflected_in_world = Eigen::Vector3d::UnitZ();          // unit, toward the light
   double apparent_radius_px = 0.0;  // the sphere's radius in the image
   int highlight_area_px = 0;        // pixels of the highlight blob
+  Eigen::Vector3d camera_centre_in_world_mm = Eigen::Vector3d::Zero();  // the view ray's origin
 };
 
 struct LightFitOptions {
