@@ -119,7 +119,8 @@ JointLightFit FitLightsJointly(const std::vector<JointLightInput>& per_light, co
     mean /= static_cast<double>(p.found.size());
     double scatter = 0.0;
     for (const auto& c : p.found) scatter += (c - mean).head<2>().squaredNorm();
-    // Per-frame scatter of the rim fits (1 sigma per axis); a floor for a single frame.
+    // Per-frame scatter of the rim fits (1 sigma per axis), at least a thousandth of the radius
+    // (the rim fits agree to ~0.002 mm on a 7.2 mm sphere, but share a bias of that size).
     const double sigma = std::max(1e-3 * p.radius, std::sqrt(scatter / (2.0 * std::max<std::size_t>(1, p.found.size() - 1))));
     p.mean = mean.head<2>();
     p.xy[0] = mean.x(), p.xy[1] = mean.y(), p.z = mean.z();
@@ -192,6 +193,7 @@ JointLightFit FitLightsJointly(const std::vector<JointLightInput>& per_light, co
     ++free_count;
   }
   out.centre_shift_rms_mm = free_count ? std::sqrt(shift_sq / free_count) : 0.0;
+  for (const auto& p : placements) out.placement_centres_mm.emplace_back(p.xy[0], p.xy[1], p.z);
   // Each light's fit on the jointly refined centres: its residual and sigma as the single fits report them.
   for (std::size_t l = 0; l < per_light.size(); ++l) {
     if (per_light[l].observations.empty()) {

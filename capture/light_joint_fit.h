@@ -25,6 +25,7 @@ struct JointLightInput {
 struct JointLightFit {
   std::vector<LightFit> lights;  // one per input, same order (an input without observations: start)
   int placements = 0;            // distinct sphere placements found
+  std::vector<Eigen::Vector3d> placement_centres_mm;  // refined (world mm), in the order found
   double centre_shift_rms_mm = 0;  // how far the joint fit moved the placements' centres
   bool converged = false;
 };
