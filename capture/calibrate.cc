@@ -128,15 +128,16 @@ void CalibrateCameras(const Manifest& manifest, const FrameLoader& load, const C
                          "a pose for camera " + spec.id + ", or a board frame in which the ChArUco board is found (" +
                              why + ")");
       }
-      // The view that sees the board best (most corners) gives the pose.
-      const auto best = std::max_element(observations.begin(), observations.end(), [](const auto& a, const auto& b) {
-        return a.corner_ids.size() < b.corner_ids.size();
-      });
-      const BoardPose pose = EstimateBoardPose(calibration.model, *manifest.targets.board, *best);
+      // The view that sees the board best (most corners) gives the pose, with every other board
+      // frame that shows the board in the same place (their corners pooled).
+      std::vector<std::string> used;
+      const BoardPose pose = EstimateBoardPoseFromFrames(calibration.model, *manifest.targets.board, observations, &used);
+      std::string frames;
+      for (const auto& f : used) frames += (frames.empty() ? "" : ", ") + f;
       calibration.model.pose = pose.pose;
-      calibration.pose_source = "board frame " + best->frame_file;
+      calibration.pose_source = (used.size() > 1 ? "board frames " : "board frame ") + frames;
       calibration.reprojection_error_px = pose.reprojection_error_px;
-      detail << "pose from board frame " << best->frame_file << " (" << pose.corners << " corners, RMS "
+      detail << "pose from " << calibration.pose_source << " (" << pose.corners << " corners, RMS "
              << pose.reprojection_error_px << " px)";
     }
     record.Ran(step, detail.str());
