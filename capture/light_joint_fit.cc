@@ -165,7 +165,8 @@ JointLightFit FitLightsJointly(const std::vector<JointLightInput>& per_light, co
       auto* cost = new ceres::AutoDiffCostFunction<HighlightResidual, 3, 2, 3>(new HighlightResidual{
           o.camera_centre_in_world_mm, (o.highlight_point_in_world_mm - o.camera_centre_in_world_mm).normalized(), p.z,
           o.radius_mm, 1.0 / RaySigmaRad(o, options), in.start.type == LightType::kDirectional});
-      problem.AddResidualBlock(cost, nullptr, p.xy, x);
+      // Huber beyond 3 sigmas: one bad highlight must not drag a centre every light shares.
+      problem.AddResidualBlock(cost, new ceres::HuberLoss(3.0), p.xy, x);
     }
     if (in.start.type == LightType::kPoint && options.manifest_position_sigma_mm > 0.0) {
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PriorResidual, 3, 3>(new PriorResidual{
