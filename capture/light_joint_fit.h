@@ -28,6 +28,10 @@ struct JointLightFit {
   std::vector<Eigen::Vector3d> placement_centres_mm;  // refined (world mm), in the order found
   double centre_shift_rms_mm = 0;  // how far the joint fit moved the placements' centres
   bool converged = false;
+  // The highlights' sigma actually used, as a fraction of LightFitOptions::highlight_sigma_px:
+  // sqrt(chi^2 / dof) of the highlight residuals when they over-determine the fit, clamped to
+  // [0.02, 1]; 1 otherwise. The lights' notes (1-sigma) use it.
+  double sigma_scale = 1.0;
 };
 
 // `per_light[i].observations` must hold SphereObservation::camera_centre_in_world_mm. Placements
