@@ -195,7 +195,7 @@ Eigen::Vector3d FindSphere(const cv::Mat& grey, const cv::Mat& grey8, const Came
 
 SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camera, const SphereTarget& sphere,
                                 const std::string& frame_file, const std::optional<Eigen::Vector3d>& known_centre,
-                                const std::optional<double>& centre_height_mm) {
+                                const std::optional<double>& centre_height_mm, bool refine_highlight) {
   if (!(sphere.radius_mm > 0.0)) {
     throw InputError(frame_file, "/targets/sphere/radius_mm", "a positive sphere radius in mm");
   }
@@ -264,14 +264,14 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   }
   observation.highlight_px = sum_w > 0 ? Eigen::Vector2d(sum_x / sum_w, sum_y / sum_w)
                                        : Eigen::Vector2d(peak_at.x, peak_at.y);
-  {
+  if (refine_highlight) {
     // Refined: the centroid under a Gaussian window centred on itself (iterated to its fixed
     // point), over every pixel above the background, not only the thresholded blob. Cutting the
     // spot at a threshold on the pixel grid moves its centroid by a few hundredths of a pixel as
     // the spot moves within a pixel; a window symmetric about the result does not. Wide enough
     // (at least 2.5 px) that a spot of one or two pixels keeps its centroid (bias < 0.01 px).
-    // Measured on the synthetic near rig (16 lights, 3 placements, true sphere centres): worst
-    // point-light position error 2.4 % with the blob's centroid, 0.30 % refined.
+    // Measured on the synthetic near rig (docs/calibration.md, "Joint fit"): with the true sphere
+    // centres, worst point-light position 2.4 % from the blob's centroid, 0.30 % refined.
     const double sigma_w = std::max(2.5, 1.5 * std::sqrt(area / kPi));
     const int reach = static_cast<int>(std::ceil(3.0 * sigma_w));
     Eigen::Vector2d c = observation.highlight_px;

@@ -10,14 +10,6 @@
 namespace u3mscan {
 namespace {
 
-// How far (1 sigma, fraction of the radius) a placement's centre may move from the mean of its
-// frames' rim fits. Loose on purpose: the rim fits agree with each other to ~0.002 mm but share a
-// bias of 0.003-0.004 mm on the synthetic near rig (a 7.2 mm sphere), which is 0.06 deg of normal;
-// the highlights of many lights fix the centre better. Measured on that rig (16 lights, spheres
-// alone): worst position error 1.35 % with 0.001 R, 0.30 % with 0.1 R. The prior still decides
-// what the highlights cannot (one placement of distant lights: a shift of the centre and a turn of
-// every direction look the same).
-constexpr double kCentrePriorSigmaOfRadius = 0.05;
 // The highlights' own scatter rescales their a priori sigma only with this many spare equations,
 // and by at most this factor (a chance small scatter must not make the fit claim any precision).
 constexpr int kMinDofForSigmaScale = 10;
@@ -132,8 +124,8 @@ JointLightFit FitLightsJointly(const std::vector<JointLightInput>& per_light, co
     mean /= static_cast<double>(p.found.size());
     double scatter = 0.0;
     for (const auto& c : p.found) scatter += (c - mean).head<2>().squaredNorm();
-    // Per-frame scatter of the rim fits (1 sigma per axis), at least kCentrePriorSigmaOfRadius.
-    p.sigma = std::max(kCentrePriorSigmaOfRadius * p.radius,
+    // Per-frame scatter of the rim fits (1 sigma per axis), at least centre_prior_sigma_of_radius.
+    p.sigma = std::max(options.centre_prior_sigma_of_radius * p.radius,
                        std::sqrt(scatter / (2.0 * std::max<std::size_t>(1, p.found.size() - 1))));
     p.mean = mean.head<2>();
     p.xy[0] = mean.x(), p.xy[1] = mean.y(), p.z = mean.z();

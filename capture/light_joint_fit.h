@@ -6,10 +6,11 @@
 // every ray reflected off it (0.005 mm on a 7 mm sphere is ~0.1 deg of reflected ray). Here the
 // placements (grouped by where their centres were found) share one centre, and all lights and
 // all placement centres are fitted together: every highlight's reflected ray must point at its
-// light, each ray weighted by its angular uncertainty (LightFitOptions::highlight_sigma_px), each
-// placement's centre held near the mean of its frames' rim fits (weight: their scatter), each
-// point light near the manifest's position (manifest_position_sigma_mm). Centres given by the
-// manifest (not found in a frame) stay fixed, as does every centre's height.
+// light, each ray weighted by its angular uncertainty (LightFitOptions::highlight_sigma_px, rescaled
+// by the highlights' own scatter where they over-determine the fit), each placement's centre held
+// loosely near the mean of its frames' rim fits (centre_prior_sigma_of_radius), each point light
+// near the manifest's position (manifest_position_sigma_mm). Centres given by the manifest (not
+// found in a frame) stay fixed, as does every centre's height. docs/calibration.md, "Joint fit".
 
 #include <vector>
 
