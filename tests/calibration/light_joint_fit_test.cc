@@ -60,7 +60,8 @@ TEST(JointLightFit, SharedPlacementsAverageOutEachFramesCentreError) {
                                                           std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
     truths.push_back(light);
     JointLightInput input;
-    input.start.id = "L" + std::to_string(l);
+    input.start.id = "L";
+    input.start.id += std::to_string(l);  // (GCC 12 warns falsely on "L" + to_string)
     input.start.type = LightType::kPoint;
     input.start.position_in_world_mm = light + Eigen::Vector3d(10.0, -8.0, 6.0);  // the manifest, 14 mm off
     for (const auto& c : centres) input.observations.push_back(Observe(eye, light, c, Eigen::Vector3d(noise(random), noise(random), 0.0)));
