@@ -9,6 +9,7 @@
 #include "capture/capture.h"
 #include "capture/flat_field.h"
 #include "capture/light_calibration.h"
+#include "capture/light_joint_fit.h"
 #include "capture/rectification.h"
 #include "core/error.h"
 #include "core/logging.h"
@@ -127,15 +128,16 @@ void CalibrateCameras(const Manifest& manifest, const FrameLoader& load, const C
                          "a pose for camera " + spec.id + ", or a board frame in which the ChArUco board is found (" +
                              why + ")");
       }
-      // The view that sees the board best (most corners) gives the pose.
-      const auto best = std::max_element(observations.begin(), observations.end(), [](const auto& a, const auto& b) {
-        return a.corner_ids.size() < b.corner_ids.size();
-      });
-      const BoardPose pose = EstimateBoardPose(calibration.model, *manifest.targets.board, *best);
+      // The view that sees the board best (most corners) gives the pose, with every other board
+      // frame that shows the board in the same place (their corners pooled).
+      std::vector<std::string> used;
+      const BoardPose pose = EstimateBoardPoseFromFrames(calibration.model, *manifest.targets.board, observations, &used);
+      std::string frames;
+      for (const auto& f : used) frames += (frames.empty() ? "" : ", ") + f;
       calibration.model.pose = pose.pose;
-      calibration.pose_source = "board frame " + best->frame_file;
+      calibration.pose_source = (used.size() > 1 ? "board frames " : "board frame ") + frames;
       calibration.reprojection_error_px = pose.reprojection_error_px;
-      detail << "pose from board frame " << best->frame_file << " (" << pose.corners << " corners, RMS "
+      detail << "pose from " << calibration.pose_source << " (" << pose.corners << " corners, RMS "
              << pose.reprojection_error_px << " px)";
     }
     record.Ran(step, detail.str());
@@ -166,6 +168,11 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
 
 void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
                      const CalibrationResult& done, CalibrationResult& result, Recorder& record) {
+  struct Pending {
+    std::size_t light;  // index into result.lights
+    std::vector<SphereObservation> observations;
+  };
+  std::vector<Pending> pending;
   for (const LightSpec& spec : manifest.lights) {
     LightCalibration calibration;
     calibration.model = LightModelFromSpec(spec);
@@ -227,9 +234,31 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
       result.lights.push_back(std::move(calibration));
       continue;
     }
-    const LightFit fit = calibration.model.type == LightType::kDirectional
-                             ? FitDirectionalLight(observations, calibration.model)
-                             : FitPointLight(observations, calibration.model, options.light_fit);
+    pending.push_back({result.lights.size(), std::move(observations)});
+    result.lights.push_back(std::move(calibration));
+  }
+  // Every light with sphere observations: fitted alone, or jointly with the others over shared
+  // sphere placements (light_joint_fit.h).
+  std::vector<LightFit> fits;
+  if (options.joint_light_fit && !pending.empty()) {
+    std::vector<JointLightInput> inputs;
+    for (auto& p : pending) inputs.push_back({result.lights[p.light].model, p.observations});
+    JointLightFit joint = FitLightsJointly(inputs, options.light_fit);
+    fits = std::move(joint.lights);
+    std::ostringstream detail;
+    detail << pending.size() << " light(s) and " << joint.placements << " sphere placement(s) fitted jointly, centres moved "
+           << joint.centre_shift_rms_mm << " mm RMS from their frames' mean" << (joint.converged ? "" : " (not converged)");
+    record.Ran("lights jointly", detail.str());
+  } else {
+    for (auto& p : pending) {
+      const LightModel& start = result.lights[p.light].model;
+      fits.push_back(start.type == LightType::kDirectional ? FitDirectionalLight(p.observations, start)
+                                                           : FitPointLight(p.observations, start, options.light_fit));
+    }
+  }
+  for (std::size_t k = 0; k < pending.size(); ++k) {
+    const LightFit& fit = fits[k];
+    LightCalibration& calibration = result.lights[pending[k].light];
     calibration.model = fit.model;
     calibration.source = "mirror sphere";
     calibration.placements = fit.placements;
@@ -244,8 +273,7 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
     }
     detail << " from " << fit.placements << " sphere placement(s), residual " << fit.residual << " "
            << fit.residual_unit << (fit.note.empty() ? "" : "; " + fit.note);
-    record.Ran(step, detail.str());
-    result.lights.push_back(std::move(calibration));
+    record.Ran("light " + calibration.model.id, detail.str());
   }
 }
 
@@ -397,13 +425,26 @@ void CalibrateColour(const Manifest& manifest, const FrameLoader& load, const Ca
              << fit.delta_e_after_mean << " even after a 3x3 fit (at most " << options.max_chart_delta_e << " expected)";
         throw InputError(spec.file, "", what.str());
       }
-      const bool improves = fit.delta_e_after_mean < fit.delta_e_before_mean;
-      result.colour = {true, improves, spec.file, locator, fit};
+      ColourCalibration colour{true, false, "", spec.file, locator, ChartPatchPitchPx(*patches), fit};
+      std::ostringstream reason;
+      if (colour.patch_pitch_px < options.min_chart_patch_pitch_px) {
+        reason << "the chart is too small to trust: its patches are " << colour.patch_pitch_px
+               << " px apart in the frame, at least " << options.min_chart_patch_pitch_px
+               << " px needed to sample their centres clear of their edges";
+        record.Warn(spec.file + ": " + reason.str() + "; colour correction not applied (camera RGB used as is)");
+      } else if (!(fit.delta_e_cross_validated_mean < fit.delta_e_before_mean)) {
+        reason << "the camera's colours are already closer to the chart than the matrix brings patches it was not "
+                  "fitted to (leave-one-out CIEDE2000 mean "
+               << fit.delta_e_cross_validated_mean << ")";
+      }
+      colour.not_applied_reason = reason.str();
+      colour.applied = colour.not_applied_reason.empty();
+      result.colour = colour;
       std::ostringstream detail;
-      detail << "3x3 correction from " << spec.file << " (chart by " << locator << "): CIEDE2000 mean "
-             << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean << " after (max "
-             << fit.delta_e_after_max << ")"
-             << (improves ? "" : "; not applied: the camera's colours are already closer to the chart");
+      detail << "3x3 correction from " << spec.file << " (chart by " << locator << ", patches " << colour.patch_pitch_px
+             << " px apart): CIEDE2000 mean " << fit.delta_e_before_mean << " before, " << fit.delta_e_after_mean
+             << " after (max " << fit.delta_e_after_max << "), " << fit.delta_e_cross_validated_mean
+             << " leave-one-out" << (colour.applied ? "" : "; not applied: " + colour.not_applied_reason);
       record.Ran("colour", detail.str());
       return;
     } catch (const InputError& error) {
@@ -420,7 +461,7 @@ nlohmann::json Vector(const Eigen::Vector3d& v) { return nlohmann::json::array({
 bool CalibrationOptions::Check() const {
   return (side == "front" || side == "back") && (!dpi || *dpi > 0.0) && min_board_frames_for_intrinsics >= 3 &&
          min_board_corners >= 4 && chart_layout.patch_pitch_mm >= 0.0 && min_flat_cos > 0.0 && min_flat_cos < 1.0 &&
-         max_chart_delta_e > 0.0;
+         max_chart_delta_e > 0.0 && min_chart_patch_pitch_px >= 0.0;
 }
 
 LightModel LightModelFromSpec(const LightSpec& spec) {
@@ -523,11 +564,14 @@ nlohmann::json CalibrationResult::ToJson() const {
     out["colour"] = {{"frame", colour.frame},
                      {"applied", colour.applied},
                      {"locator", colour.locator},
+                     {"patch_pitch_px", colour.patch_pitch_px},
+                     {"ciede2000_cross_validated_mean", colour.fit.delta_e_cross_validated_mean},
                      {"matrix", matrix},
                      {"ciede2000_before_mean", colour.fit.delta_e_before_mean},
                      {"ciede2000_before_max", colour.fit.delta_e_before_max},
                      {"ciede2000_after_mean", colour.fit.delta_e_after_mean},
                      {"ciede2000_after_max", colour.fit.delta_e_after_max}};
+    if (!colour.applied) out["colour"]["not_applied_reason"] = colour.not_applied_reason;
   } else {
     out["colour"] = nullptr;
   }

@@ -44,11 +44,22 @@ struct CalibrationOptions {
   // A chart whose patches a 3x3 matrix cannot bring within this mean CIEDE2000 of the reference
   // is not a chart (a blank frame, a wrong layout): "chart not found".
   double max_chart_delta_e = 5.0;
+  // A chart whose patches lie fewer camera pixels apart than this is too small to trust: the
+  // sampled centre of a patch (half its pitch) keeps only ~0.15 pitch from the patch's edge, and
+  // the locator (mcc's box, measured off by up to 1.2 px on a 48 px frame) plus one pixel of
+  // anti-aliasing must fit in that margin: 0.15 * 10 px = 1.5 px. Measured on the synthetic
+  // scanner (distant rig, plain): pitch 6.2 px (48 px frame) gave a matrix with gains of 1.05-1.25
+  // that took the albedo from dE 2.86 to 6.41; 8.2 px (64 px) from 2.94 to 3.71; 10.3 px (80 px)
+  // and more left it unchanged (docs/calibration.md). The matrix is then not applied (identity).
+  double min_chart_patch_pitch_px = 10.0;
   double min_flat_cos = 0.05;            // flat pixels with grazing light are not measured
   // Mirror spheres found in their frames rest on the sample plane (centre z = radius), or sit at
   // the height of the manifest's centre_mm when it gives one; false: the height is fitted too.
   bool sphere_on_known_height = true;
   LightFitOptions light_fit;             // highlight accuracy, manifest prior for point lights
+  // Fit all lights and the sphere placements they share together (light_joint_fit.h); false:
+  // each light alone on its own frames' sphere centres.
+  bool joint_light_fit = true;
   bool Check() const;
 };
 
@@ -85,11 +96,15 @@ struct FlatCalibration {
 
 struct ColourCalibration {
   bool fitted = false;
-  // Applied by BuildStack only when it brings the chart closer to its reference (mean CIEDE2000
-  // after < before): a camera already in sRGB gains nothing but noise from a 3x3 fit.
+  // Applied by BuildStack only when the chart is large enough to trust (patch pitch of at least
+  // CalibrationOptions::min_chart_patch_pitch_px) and the matrix brings colours it was not fitted
+  // to closer to the reference (leave-one-out mean CIEDE2000 < before): a camera already in sRGB
+  // gains nothing but noise from a 3x3 fit. Otherwise the camera's RGB is used as is (identity).
   bool applied = false;
+  std::string not_applied_reason;  // empty when applied
   std::string frame;
   std::string locator;  // "mcc" or "known layout"
+  double patch_pitch_px = 0;  // distance between neighbouring patch centres in the frame
   ColourFit fit;
 };
 

@@ -166,6 +166,54 @@ BoardPose EstimateBoardPose(const CameraModel& camera, const BoardTarget& board,
   return result;
 }
 
+BoardPose EstimateBoardPoseFromFrames(const CameraModel& camera, const BoardTarget& board,
+                                      const std::vector<BoardObservation>& observations,
+                                      std::vector<std::string>* used, double same_placement_px) {
+  if (observations.empty()) throw InputError("board frames", "", "at least one board frame");
+  const auto best = std::max_element(observations.begin(), observations.end(), [](const auto& a, const auto& b) {
+    return a.corner_ids.size() < b.corner_ids.size();
+  });
+  const BoardPose reference = EstimateBoardPose(camera, board, *best);
+  CameraModel posed = camera;
+  posed.pose = reference.pose;
+  const auto charuco = MakeBoard(board, best->frame_file);
+  std::vector<cv::Point3f> object;
+  std::vector<cv::Point2f> image;
+  std::vector<const BoardObservation*> members;
+  for (const auto& o : observations) {
+    if (&o != &*best && !(BoardReprojectionErrorPx(posed, board, o) < same_placement_px)) continue;
+    members.push_back(&o);
+    for (std::size_t i = 0; i < o.corner_ids.size(); ++i) {
+      object.push_back(charuco->chessboardCorners.at(o.corner_ids[i]));
+      image.emplace_back(static_cast<float>(o.pixels[i].x()), static_cast<float>(o.pixels[i].y()));
+    }
+  }
+  if (used) {
+    used->clear();
+    for (const auto* m : members) used->push_back(m->frame_file);
+  }
+  if (members.size() == 1) return reference;
+  const cv::Mat distortion = cv::Mat(camera.distortion, true).reshape(1, 1);
+  cv::Mat rvec, tvec;
+  if (!cv::solvePnP(object, image, CameraMatrix(camera.intrinsics), distortion, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE)) {
+    return reference;
+  }
+  cv::solvePnPRefineLM(object, image, CameraMatrix(camera.intrinsics), distortion, rvec, tvec);
+  BoardPose result;
+  result.pose = PoseFromBoardRvecTvec(board, cv::Vec3d(rvec), cv::Vec3d(tvec));
+  posed.pose = result.pose;
+  double sum = 0.0;
+  int count = 0;
+  for (const auto* m : members) {
+    const double rms = BoardReprojectionErrorPx(posed, board, *m);
+    sum += rms * rms * m->corner_ids.size();
+    count += static_cast<int>(m->corner_ids.size());
+  }
+  result.reprojection_error_px = std::sqrt(sum / std::max(1, count));
+  result.corners = count;
+  return result;
+}
+
 IntrinsicsFit CalibrateIntrinsics(int width, int height, const BoardTarget& board,
                                   const std::vector<BoardObservation>& observations, const CameraIntrinsics& initial) {
   if (observations.size() < 3) {

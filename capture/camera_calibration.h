@@ -43,6 +43,15 @@ struct BoardPose {
 // Throws InputError naming the frame when no pose is found.
 BoardPose EstimateBoardPose(const CameraModel& camera, const BoardTarget& board, const BoardObservation& observation);
 
+// The pose from every board frame that shows the board where the best frame (most corners) shows
+// it: one solvePnP (then solvePnPRefineLM) over all their corners, so each frame's corner noise
+// averages out. A frame counts as the same placement when its corners reproject within
+// `same_placement_px` (RMS) under the best frame's own pose; others (a board moved for
+// intrinsics) are left out. `used` lists the frames taken. Throws as EstimateBoardPose.
+BoardPose EstimateBoardPoseFromFrames(const CameraModel& camera, const BoardTarget& board,
+                                      const std::vector<BoardObservation>& observations,
+                                      std::vector<std::string>* used, double same_placement_px = 1.0);
+
 struct IntrinsicsFit {
   CameraIntrinsics intrinsics;
   std::array<double, 5> distortion{};

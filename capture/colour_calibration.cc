@@ -181,6 +181,28 @@ std::optional<std::vector<ChartPatch>> MeasureChartWithMcc(const Image& frame_rg
   return best;
 }
 
+double ChartPatchPitchPx(const std::vector<ChartPatch>& patches) {
+  std::vector<double> steps;
+  const int n = static_cast<int>(patches.size());
+  for (int k = 0; k < n; ++k) {
+    const int row = k / kColumns, col = k % kColumns;
+    if (col + 1 < kColumns && k + 1 < n) steps.push_back((patches[k + 1].centre_px - patches[k].centre_px).norm());
+    if (row + 1 < kRows && k + kColumns < n) {
+      steps.push_back((patches[k + kColumns].centre_px - patches[k].centre_px).norm());
+    }
+  }
+  if (steps.empty()) return 0.0;
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  return steps[steps.size() / 2];
+}
+
+namespace {
+// M^T = argmin |X M^T - R| over the rows of x and r: r_i^T = m_i^T M^T.
+Eigen::Matrix3d SolveMatrix(const Eigen::MatrixXd& x, const Eigen::MatrixXd& r) {
+  return x.colPivHouseholderQr().solve(r).transpose();
+}
+}  // namespace
+
 ColourFit FitColourCorrection(const std::vector<Rgb>& measured, const std::vector<Rgb>& reference) {
   ColourFit fit;
   const std::size_t n = std::min(measured.size(), reference.size());
@@ -189,8 +211,20 @@ ColourFit FitColourCorrection(const std::vector<Rgb>& measured, const std::vecto
   for (std::size_t i = 0; i < n; ++i) {
     for (int c = 0; c < 3; ++c) x(i, c) = measured[i][c], r(i, c) = reference[i][c];
   }
-  // r_i^T = m_i^T M^T  =>  M^T = argmin |X M^T - R|.
-  fit.matrix = x.colPivHouseholderQr().solve(r).transpose();
+  fit.matrix = SolveMatrix(x, r);
+  if (n > 3) {
+    double sum_cv = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      Eigen::MatrixXd x_rest(n - 1, 3), r_rest(n - 1, 3);
+      for (std::size_t j = 0, k = 0; j < n; ++j) {
+        if (j == i) continue;
+        x_rest.row(k) = x.row(j), r_rest.row(k) = r.row(j), ++k;
+      }
+      const Eigen::Vector3d corrected = SolveMatrix(x_rest, r_rest) * x.row(i).transpose();
+      sum_cv += Ciede2000(LinearSrgbToLab({corrected[0], corrected[1], corrected[2]}), LinearSrgbToLab(reference[i]));
+    }
+    fit.delta_e_cross_validated_mean = sum_cv / n;
+  }
   double sum_before = 0, sum_after = 0, sum_sq = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector3d m(measured[i][0], measured[i][1], measured[i][2]);

@@ -53,7 +53,15 @@ struct ColourFit {
   double delta_e_before_mean = 0, delta_e_before_max = 0;  // CIEDE2000, measured vs reference
   double delta_e_after_mean = 0, delta_e_after_max = 0;
   double rms_rgb_after = 0;  // linear RGB residual of the fit
+  // Leave-one-out: each patch corrected by the matrix fitted to the other patches, mean CIEDE2000.
+  // What the matrix does to colours it was not fitted to; the in-sample `after` always looks
+  // better than `before`, even when the matrix only bends to fit bad patch readings.
+  double delta_e_cross_validated_mean = 0;
 };
+
+// Size of the chart in the frame: the median distance (px) between the centres of neighbouring
+// patches (along rows and columns). 0 when fewer than two patches.
+double ChartPatchPitchPx(const std::vector<ChartPatch>& patches);
 
 // Least squares: min sum |M m_i - r_i|^2 over the patches (measured in reflectance units).
 ColourFit FitColourCorrection(const std::vector<Rgb>& measured, const std::vector<Rgb>& reference);

@@ -195,7 +195,7 @@ Eigen::Vector3d FindSphere(const cv::Mat& grey, const cv::Mat& grey8, const Came
 
 SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camera, const SphereTarget& sphere,
                                 const std::string& frame_file, const std::optional<Eigen::Vector3d>& known_centre,
-                                const std::optional<double>& centre_height_mm) {
+                                const std::optional<double>& centre_height_mm, bool refine_highlight) {
   if (!(sphere.radius_mm > 0.0)) {
     throw InputError(frame_file, "/targets/sphere/radius_mm", "a positive sphere radius in mm");
   }
@@ -264,6 +264,37 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   }
   observation.highlight_px = sum_w > 0 ? Eigen::Vector2d(sum_x / sum_w, sum_y / sum_w)
                                        : Eigen::Vector2d(peak_at.x, peak_at.y);
+  if (refine_highlight) {
+    // Refined: the centroid under a Gaussian window centred on itself (iterated to its fixed
+    // point), over every pixel above the background, not only the thresholded blob. Cutting the
+    // spot at a threshold on the pixel grid moves its centroid by a few hundredths of a pixel as
+    // the spot moves within a pixel; a window symmetric about the result does not. Wide enough
+    // (at least 2.5 px) that a spot of one or two pixels keeps its centroid (bias < 0.01 px).
+    // Measured on the synthetic near rig (docs/calibration.md, "Joint fit"): with the true sphere
+    // centres, worst point-light position 2.4 % from the blob's centroid, 0.30 % refined.
+    const double sigma_w = std::max(2.5, 1.5 * std::sqrt(area / kPi));
+    const int reach = static_cast<int>(std::ceil(3.0 * sigma_w));
+    Eigen::Vector2d c = observation.highlight_px;
+    for (int it = 0; it < 20; ++it) {
+      double w_sum = 0, x_sum = 0, y_sum = 0;
+      for (int row = std::max(0, static_cast<int>(c.y()) - reach); row <= std::min(grey.rows - 1, static_cast<int>(c.y()) + reach); ++row) {
+        for (int col = std::max(0, static_cast<int>(c.x()) - reach); col <= std::min(grey.cols - 1, static_cast<int>(c.x()) + reach); ++col) {
+          if (!disc.at<unsigned char>(row, col)) continue;
+          const double v = grey.at<float>(row, col) - background;
+          if (v <= 0) continue;
+          const double d2 = (col - c.x()) * (col - c.x()) + (row - c.y()) * (row - c.y());
+          const double w = v * std::exp(-0.5 * d2 / (sigma_w * sigma_w));
+          w_sum += w, x_sum += w * col, y_sum += w * row;
+        }
+      }
+      if (!(w_sum > 0)) break;
+      const Eigen::Vector2d next(x_sum / w_sum, y_sum / w_sum);
+      const bool done = (next - c).norm() < 1e-4;
+      c = next;
+      if (done) break;
+    }
+    observation.highlight_px = c;
+  }
   const Eigen::Vector3d ray = camera.PixelRayInWorld(observation.highlight_px);
   Eigen::Vector3d hit;
   if (!IntersectSphere(camera.CentreInWorld(), ray, observation.centre_in_world_mm, sphere.radius_mm, &hit)) {
@@ -274,6 +305,7 @@ SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camer
   observation.highlight_point_in_world_mm = hit;
   observation.apparent_radius_px = radius_px;
   observation.highlight_area_px = area;
+  observation.camera_centre_in_world_mm = camera.CentreInWorld();
   observation.reflected_in_world = (2.0 * normal.dot(to_camera) * normal - to_camera).normalized();
   return observation;
 }

@@ -29,6 +29,7 @@ struct SphereObservation {
   Eigen::Vector3d reflected_in_world = Eigen::Vector3d::UnitZ();          // unit, toward the light
   double apparent_radius_px = 0.0;  // the sphere's radius in the image
   int highlight_area_px = 0;        // pixels of the highlight blob
+  Eigen::Vector3d camera_centre_in_world_mm = Eigen::Vector3d::Zero();  // the view ray's origin
 };
 
 struct LightFitOptions {
@@ -41,16 +42,26 @@ struct LightFitOptions {
   // close together fix a light's direction well and its distance poorly: the prior keeps the
   // distance where the spheres cannot tell.
   double manifest_position_sigma_mm = 10.0;
+  // Joint fit (light_joint_fit.h): how far (1 sigma, fraction of the sphere's radius) a placement's
+  // centre may move from the mean of its frames' rim fits. Loose on purpose: the rim fits agree
+  // with each other to ~0.002 mm but share a bias of 0.003-0.004 mm on the synthetic near rig (a
+  // 7.2 mm sphere), 0.06 deg of normal; the highlights of many lights fix the centre better
+  // (measured: docs/calibration.md, "Joint fit"). The prior still decides what the highlights
+  // cannot (one placement of distant lights: a shift of the centre and a turn of every direction
+  // look the same).
+  double centre_prior_sigma_of_radius = 0.05;
 };
 
 // Locates the sphere and its highlight in a linear frame of `camera` (pose known). `known_centre`
 // (the manifest's centre_mm) skips the sphere search; `centre_height_mm` (z of the centre, e.g.
 // the radius for a sphere resting on the sample plane) lets the search fit x and y only. Throws
-// InputError naming `frame_file` when the sphere or the highlight is not found.
+// InputError naming `frame_file` when the sphere or the highlight is not found. `refine_highlight`
+// false keeps the thresholded blob's centroid (for measurements; see the .cc).
 SphereObservation ObserveSphere(const Image& frame_rgb, const CameraModel& camera, const SphereTarget& sphere,
                                 const std::string& frame_file,
                                 const std::optional<Eigen::Vector3d>& known_centre,
-                                const std::optional<double>& centre_height_mm = std::nullopt);
+                                const std::optional<double>& centre_height_mm = std::nullopt,
+                                bool refine_highlight = true);
 
 struct LightFit {
   LightModel model;

@@ -93,11 +93,12 @@ struct TinyCapture {
     const double value = exposure_s * rho / kPi * light_directions[light].z();
     return Image(truth.width, truth.height, 3, static_cast<float>(value));
   }
-  Image Chart() const {
+  // The 24-patch chart centred on the origin, patches `pitch_mm` apart (10 mm: 40 camera px).
+  Image Chart(double pitch_mm = 10.0) const {
     const auto& reference = ClassicChartLinearSrgb();
     const double cos_theta = light_directions[0].z();
     return testing::RenderPlane(truth, [&](const Eigen::Vector3d& p) -> Eigen::Vector3d {
-      const double u = p.x() / 10.0 + 3.0, v = 2.0 - p.y() / 10.0;
+      const double u = p.x() / pitch_mm + 3.0, v = 2.0 - p.y() / pitch_mm;
       const int col = static_cast<int>(std::floor(u)), row = static_cast<int>(std::floor(v));
       Eigen::Vector3d rho = Eigen::Vector3d::Constant(0.03);
       if (col >= 0 && col < 6 && row >= 0 && row < 4 && u - col > 0.1 && u - col < 0.9 && v - row > 0.1 && v - row < 0.9) {
@@ -246,6 +247,122 @@ TEST(Calibrate, ChartNotFoundSkipsColourWithAMessageNamingTheFrame) {
   for (const auto& w : result.warnings) all += w + "\n";
   EXPECT_NE(all.find("chart.tif"), std::string::npos) << all;
   EXPECT_NE(all.find("colour chart"), std::string::npos) << all;
+}
+
+TEST(Calibrate, ChartTooSmallToTrustIsNotAppliedAndSaysSo) {
+  // Patches 1.75 mm = 7 camera px apart: below min_chart_patch_pitch_px (10). With a locator error
+  // of 1-2 px (what mcc showed on a 48 px frame) the outer patches' sampled centres reach their
+  // edges, the readings bend, and a 3x3 fit "corrects" the chart while it makes the fabric wrong
+  // (on the synthetic scanner: albedo dE 2.86 -> 6.41 at 48 px). Identity instead.
+  constexpr double kPitchMm = 1.75;
+  constexpr double kLayoutScale = 1.10;  // the layout's pitch 10 % too large: outer patches sampled off centre
+  TinyCapture capture = TinyCapture::Shared();
+  for (auto& [index, image] : capture.frames) {
+    if (capture.manifest.frames[index].role == FrameRole::kChart) {
+      image = capture.Chart(kPitchMm);
+      for (float& v : image.data()) v += static_cast<float>(kDark);
+    }
+  }
+  CalibrationOptions options = TestOptions();
+  options.chart_layout.patch_pitch_mm = kPitchMm * kLayoutScale;
+  const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), options);
+  ASSERT_TRUE(result.colour.fitted);
+  EXPECT_NEAR(result.colour.patch_pitch_px, kPitchMm * kLayoutScale / 0.25, 0.1);
+  EXPECT_FALSE(result.colour.applied);
+  EXPECT_NE(result.colour.not_applied_reason.find("too small to trust"), std::string::npos)
+      << result.colour.not_applied_reason;
+  std::string all;
+  for (const auto& w : result.warnings) all += w + "\n";
+  EXPECT_NE(all.find("chart.tif: the chart is too small to trust"), std::string::npos) << all;
+  const nlohmann::json json = result.ToJson();
+  EXPECT_EQ(json["colour"]["applied"], false);
+  EXPECT_TRUE(json["colour"]["not_applied_reason"].is_string());
+  // The stack keeps the camera's RGB: the fabric's reflectance comes through unchanged.
+  const Stack stack = BuildStack(capture.manifest, capture.Loader(), result, options);
+  const auto& observation = stack.observations.front();
+  const double expected = kFabricReflectance / kPi * capture.light_directions[observation.light].z();
+  const int row = stack.grid.height / 2, col = stack.grid.width / 2;
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(observation.rgb.at(c, row, col), expected, 0.01 * expected);
+  // The same chart without the size gate: the bent readings give a matrix far from identity.
+  options.min_chart_patch_pitch_px = 0.0;
+  const CalibrationResult ungated = Calibrate(capture.manifest, capture.Loader(), options);
+  std::cout << "measured: chart 7 px a patch, layout 10 % off: CIEDE2000 " << ungated.colour.fit.delta_e_before_mean
+            << " before, " << ungated.colour.fit.delta_e_after_mean << " after, "
+            << ungated.colour.fit.delta_e_cross_validated_mean << " leave-one-out; matrix diagonal "
+            << ungated.colour.fit.matrix.diagonal().transpose() << "\n";
+  constexpr double kBentMatrix = 0.1;  // |M - I| (Frobenius) of readings that reach the patches' edges
+  EXPECT_GT((ungated.colour.fit.matrix - Eigen::Matrix3d::Identity()).norm(), kBentMatrix);
+  EXPECT_FALSE(ungated.colour.applied);  // the leave-one-out gate catches this one too
+  EXPECT_EQ(ungated.colour.not_applied_reason.find("too small"), std::string::npos);
+}
+
+TEST(Calibrate, BoardNotFoundWithAManifestPoseFallsBackAndNamesTheFrame) {
+  TinyCapture capture = TinyCapture::Shared();
+  capture.manifest.cameras[0].pose = CameraPose{capture.truth.pose.rotation, capture.truth.pose.translation_mm};
+  for (auto& [index, image] : capture.frames) {
+    if (capture.manifest.frames[index].role == FrameRole::kBoard) image = Image(320, 240, 3, 0.3f);
+  }
+  const CalibrationResult result = Calibrate(capture.manifest, capture.Loader(), TestOptions());
+  ASSERT_EQ(result.cameras.size(), 1u);
+  EXPECT_EQ(result.cameras[0].pose_source, "manifest");
+  EXPECT_TRUE(result.cameras[0].board_frames.empty());
+  std::string all;
+  for (const auto& w : result.warnings) all += w + "\n";
+  EXPECT_NE(all.find("board.tif"), std::string::npos) << all;
+  EXPECT_NE(all.find("ChArUco board"), std::string::npos) << all;
+}
+
+// Issue 4: "Saturated, shadowed-by-mask and out-of-view pixels are marked, not silently used".
+// Saturated camera pixels and grid points the camera does not see are flagged in the stack;
+// untouched pixels are not. (The capture format has no shadow mask: docs/calibration.md, Limits.)
+TEST(Calibrate, StackFlagsSaturatedAndOutOfViewPixels) {
+  const TinyCapture& capture = TinyCapture::Shared();
+  // A block of saturated pixels in the first sample frame, around the view's centre.
+  constexpr int kBlock0 = 140, kBlock1 = 180;  // columns and rows [140, 180) of the camera frame
+  std::size_t first_sample = 0;
+  while (capture.manifest.frames[first_sample].role != FrameRole::kSample) ++first_sample;
+  FrameLoader loader = [&](std::size_t index) {
+    DecodedFrame frame = capture.Loader()(index);
+    if (index == first_sample) {
+      for (int row = kBlock0 - 40; row < kBlock1 - 40; ++row) {
+        for (int col = kBlock0; col < kBlock1; ++col) frame.saturated[row * frame.rgb.width() + col] = 1;
+      }
+    }
+    return frame;
+  };
+  CalibrationOptions options = TestOptions();
+  options.region_mm = std::array<double, 4>{-50.0, -20.0, 50.0, 20.0};  // the view is 80 mm wide: x beyond +-40 unseen
+  const CalibrationResult result = Calibrate(capture.manifest, loader, options);
+  const Stack stack = BuildStack(capture.manifest, loader, result, options);
+  const CameraModel& camera = result.cameras[0].model;
+  int saturated = 0, out_of_view = 0, clean = 0;
+  for (const Observation& o : stack.observations) {
+    ASSERT_EQ(o.flags.size(), static_cast<std::size_t>(stack.grid.width * stack.grid.height));
+    const bool first = &o == &stack.observations.front();
+    for (int row = 0; row < stack.grid.height; ++row) {
+      for (int col = 0; col < stack.grid.width; ++col) {
+        const std::uint8_t flag = o.flags[row * stack.grid.width + col];
+        const Eigen::Vector2d px = camera.Project(stack.grid.PixelCentreInWorld(col, row));
+        const bool seen = px.x() > 1.0 && px.y() > 1.0 && px.x() < camera.width - 2.0 && px.y() < camera.height - 2.0;
+        const bool outside_view = px.x() < -1.0 || px.x() > camera.width || px.y() < -1.0 || px.y() > camera.height;
+        const bool in_block = px.x() > kBlock0 + 1 && px.x() < kBlock1 - 2 && px.y() > kBlock0 - 39 && px.y() < kBlock1 - 42;
+        const bool near_block = px.x() > kBlock0 - 3 && px.x() < kBlock1 + 2 && px.y() > kBlock0 - 43 && px.y() < kBlock1 - 38;
+        if (outside_view) {
+          EXPECT_TRUE(flag & kOutOfView) << col << "," << row;
+          out_of_view += (flag & kOutOfView) ? 1 : 0;
+        } else if (first && in_block) {
+          EXPECT_TRUE(flag & kSaturated) << col << "," << row;
+          saturated += (flag & kSaturated) ? 1 : 0;
+        } else if (seen && !(first && near_block)) {
+          EXPECT_EQ(flag, 0) << col << "," << row;
+          ++clean;
+        }
+      }
+    }
+  }
+  EXPECT_GT(saturated, 100);
+  EXPECT_GT(out_of_view, 100);
+  EXPECT_GT(clean, 1000);
 }
 
 TEST(Calibrate, CaptureFolderOnDiskGivesTheSameCalibration) {

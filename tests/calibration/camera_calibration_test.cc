@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <iostream>
+#include <random>
 
 #include "core/error.h"
 #include "core/units.h"
@@ -48,6 +50,45 @@ TEST(CameraCalibration, PoseFromOneBoardFrameWithKnownIntrinsics) {
       EXPECT_LT((estimated.Project(point) - truth.Project(point)).norm(), kPlaneRegistrationTolerancePx);
     }
   }
+}
+
+TEST(CameraCalibration, PoseFromEveryFrameOfTheSameBoardPlacement) {
+  // Four frames of the board where it lies (each with its own sensor noise) and one of the board
+  // moved by 5 mm (as for intrinsics): the pose pools the four and leaves the moved one out.
+  constexpr double kNoise = 0.01;  // per-pixel noise, decoded units (board white 0.9)
+  CameraModel truth = testing::TiltedCamera(400, 300, 300.0, 70.0, 12.0, 20.0);
+  std::vector<BoardObservation> observations;
+  std::mt19937 random(3);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(kNoise));
+  const Image clean = testing::RenderBoard(truth, TestBoard());
+  for (int i = 0; i < 4; ++i) {
+    Image frame = clean;
+    for (float& v : frame.data()) v += noise(random);
+    observations.push_back(DetectBoard(frame, TestBoard(), "board" + std::to_string(i) + ".tif"));
+  }
+  CameraModel moved = truth;
+  moved.pose.translation_mm += Eigen::Vector3d(5.0, 0.0, 0.0);  // the camera 5 mm over = the board 5 mm back
+  observations.push_back(DetectBoard(testing::RenderBoard(moved, TestBoard()), TestBoard(), "moved.tif"));
+  CameraModel unknown_pose = truth;
+  unknown_pose.pose = CameraPose{};
+  std::vector<std::string> used;
+  const BoardPose pooled = EstimateBoardPoseFromFrames(unknown_pose, TestBoard(), observations, &used);
+  ASSERT_EQ(used.size(), 4u);
+  for (const auto& file : used) EXPECT_NE(file, "moved.tif");
+  EXPECT_LT(pooled.reprojection_error_px, kMaxReprojectionErrorPx);
+  int corners = 0;
+  for (int i = 0; i < 4; ++i) corners += static_cast<int>(observations[i].corner_ids.size());
+  EXPECT_EQ(pooled.corners, corners);
+  EXPECT_LT((pooled.pose.translation_mm - truth.pose.translation_mm).norm(), kPoseTranslationToleranceMm);
+  EXPECT_LT(RotationAngleDeg(pooled.pose.rotation, truth.pose.rotation), kPoseRotationToleranceDeg);
+  double single_worst = 0.0;
+  for (int i = 0; i < 4; ++i) {
+    single_worst = std::max(single_worst, RotationAngleDeg(EstimateBoardPose(unknown_pose, TestBoard(), observations[i]).pose.rotation,
+                                                           truth.pose.rotation));
+  }
+  std::cout << "measured: board pose from 4 noisy frames of one placement: rotation off by "
+            << RotationAngleDeg(pooled.pose.rotation, truth.pose.rotation) << " deg pooled, worst single frame "
+            << single_worst << " deg\n";
 }
 
 TEST(CameraCalibration, IntrinsicsFromSeveralBoardFrames) {
