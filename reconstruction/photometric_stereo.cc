@@ -174,6 +174,12 @@ struct PixelEstimate {
   std::uint8_t state = 0;
 };
 
+// Lights lower than this (sin of 15 deg elevation) keep Lambert's law: at grazing incidence the
+// lobe's Schlick term is largest and least supported by real fabrics, and a rig of grazing lights
+// alone cannot pin the roughness (cast shadows dominate the residual: the scanner's `grazing` rig,
+// 5 deg, picked r = 0 and sent the fitter's roughness to 0.19 for a truth of 0.6).
+constexpr double kBurleyMinLightZ = 0.2588;
+
 class Solver {
  public:
   Solver(const Stack& stack, const PhotometricStereoOptions& options) : stack_(stack), options_(options) {
@@ -235,7 +241,8 @@ class Solver {
       o.raw_rgb = o.rgb;
       o.l = light.DirectionFrom(x);
       o.s = o.l * e;
-      if (burley()) {
+      o.fd90_minus_1 = 0.0;  // Lambert's law unless the Burley lobe applies below
+      if (burley() && o.l.z() >= kBurleyMinLightZ) {
         const Vector3d centre = stack_.views.empty() ? Vector3d(0, 0, 1000) : stack_.views[ob.view].centre_in_world_mm;
         o.v = (centre - x).normalized();
         const double cos_d = std::clamp(o.l.dot((o.l + o.v).normalized()), 0.0, 1.0);
@@ -419,6 +426,7 @@ class Solver {
   bool has_point_lights_ = false;
   double roughness_ = -1.0;
 };
+
 
 // Steepest normal (n_z, i.e. cos of the view angle for a camera above) re-weighted for the Burley lobe.
 constexpr double kBurleyMinNormalZ = 0.3;
