@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "capture/camera_model.h"
+#include "capture/light_from_plane.h"
 #include "capture/manifest.h"
 #include "core/image.h"
 #include "core/stack.h"
@@ -50,6 +51,11 @@ struct LightFitOptions {
   // cannot (one placement of distant lights: a shift of the centre and a turn of every direction
   // look the same).
   double centre_prior_sigma_of_radius = 0.05;
+  // A point light seen on ONE sphere placement: its distance along the sphere's reflected ray from
+  // the shading of its flat frame (white target on the sample plane, light_from_plane.h), when
+  // the capture has one; otherwise (or when that fit is ill-conditioned) the manifest's distance.
+  bool distance_from_flat = true;
+  PlaneLightFitOptions plane;
 };
 
 // Locates the sphere and its highlight in a linear frame of `camera` (pose known). `known_centre`
