@@ -4,7 +4,8 @@
 // the cone of rays tangent to a sphere of the known radius), its specular highlight is found to
 // sub-pixel precision, and the view ray is reflected about the sphere's normal there. A distant
 // light's direction is the mean of the reflected rays over placements; a point light lies where
-// the reflected rays of two or more placements meet (least squares).
+// the reflected rays of two or more placements meet (least squares); with one placement it lies on
+// that placement's ray, at the distance its flat frame gives (light_from_plane.h, wired in calibrate.cc).
 
 #include <Eigen/Core>
 #include <optional>

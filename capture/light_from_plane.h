@@ -40,8 +40,10 @@ struct PlaneLightFitOptions {
   // Search range of the distance along the ray, as multiples of the start distance.
   double min_distance_factor = 0.25, max_distance_factor = 4.0;
   // Refused above this 1-sigma of t as a fraction of t: the issue asks for 1 % of the distance,
-  // a fit three times looser than that says nothing the manifest does not.
-  double max_relative_sigma = 0.03;
+  // and a looser fit is no better than a design value (the manifest prior's default is 10 mm,
+  // 2.5 % at 400 mm). The whole view of the synthetic near rig gives 0.14-0.33 %; 4 x 4 mm of it,
+  // 2.6 % (LightFromPlane tests).
+  double max_relative_sigma = 0.01;
   double max_profile_exponent = 40.0;  // search range of n when the manifest gives no profile
 };
 
