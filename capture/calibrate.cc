@@ -166,6 +166,60 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
   record.Ran("grid", detail.str());
 }
 
+// A point light seen on one sphere placement: its distance along the sphere's ray from the
+// shading of its flat frame (light_from_plane.h). Without a flat frame, or with an ill-conditioned
+// fit, the light keeps the distance the sphere fit gave (the manifest's), and the log says why.
+void DistanceFromFlat(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
+                      const CalibrationResult& done, const SphereObservation& sphere, LightCalibration& calibration,
+                      Recorder& record) {
+  const std::string step = "light " + calibration.model.id + " distance from flat";
+  const std::string keep = ": distance along the sphere's ray from the manifest";
+  const std::string& id = calibration.model.id;
+  std::optional<std::size_t> flat_index;
+  for (std::size_t index : FramesWith(manifest, FrameRole::kFlat, nullptr, &id)) {
+    if (done.FindCamera(manifest.frames[index].camera)) {
+      flat_index = index;
+      break;
+    }
+  }
+  if (!flat_index) {
+    record.Skipped(step, "one sphere placement and no flat frame of this light" + keep);
+    return;
+  }
+  if (!manifest.targets.white) {
+    record.Skipped(step, "no /targets/white for the flat frame" + keep);
+    return;
+  }
+  const FrameSpec& spec = manifest.frames[*flat_index];
+  try {
+    const DecodedFrame flat = LoadCorrected(manifest, load, done.dark_ambient, *flat_index);
+    const MetricGrid& g = done.grid;
+    const std::array<double, 4> region{g.x0_mm, g.y1_mm - g.height * g.pitch_mm, g.x0_mm + g.width * g.pitch_mm, g.y1_mm};
+    const Eigen::Vector3d ray = (calibration.model.position_in_world_mm - sphere.highlight_point_in_world_mm).normalized();
+    const PlaneLightFit fit = FitPointLightOnPlane(flat.rgb, flat.saturated, done.FindCamera(spec.camera)->model,
+                                                   calibration.model, sphere.highlight_point_in_world_mm, ray, region,
+                                                   spec.file, options.light_fit.plane);
+    std::ostringstream detail;
+    detail << "distance " << fit.distance_mm << " mm along the sphere's ray (1-sigma " << fit.sigma_mm
+           << " mm) from " << fit.samples << " points of " << spec.file << ", shading residual "
+           << fit.residual_rms * 100.0 << " % RMS";
+    if (fit.exponent_fitted) detail << ", profile exponent fitted " << fit.model.profile_exponent;
+    if (!fit.ok) {
+      record.Warn(fit.reason + keep);
+      record.Skipped(step, fit.reason + keep);
+      return;
+    }
+    calibration.model = fit.model;
+    calibration.source = "mirror sphere + flat";
+    calibration.note += (calibration.note.empty() ? "" : "; ") + detail.str();
+    detail << "; position (" << fit.model.position_in_world_mm.transpose() << ") mm";
+    record.Ran(step, detail.str());
+  } catch (const InputError& error) {
+    record.Warn(std::string(error.what()) + keep);
+    record.Skipped(step, std::string(error.what()) + keep);
+  }
+}
+
 void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const CalibrationOptions& options,
                      const CalibrationResult& done, CalibrationResult& result, Recorder& record) {
   struct Pending {
@@ -274,6 +328,10 @@ void CalibrateLights(const Manifest& manifest, const FrameLoader& load, const Ca
     detail << " from " << fit.placements << " sphere placement(s), residual " << fit.residual << " "
            << fit.residual_unit << (fit.note.empty() ? "" : "; " + fit.note);
     record.Ran("light " + calibration.model.id, detail.str());
+    if (fit.model.type == LightType::kPoint && pending[k].observations.size() == 1 &&
+        options.light_fit.distance_from_flat) {
+      DistanceFromFlat(manifest, load, options, done, pending[k].observations.front(), calibration, record);
+    }
   }
 }
 

@@ -80,7 +80,7 @@ struct CameraCalibration {
 
 struct LightCalibration {
   LightModel model;
-  std::string source = "manifest";  // or "mirror sphere"
+  std::string source = "manifest";  // or "mirror sphere", or "mirror sphere + flat" (one placement, light_from_plane.h)
   int placements = 0;
   std::optional<double> residual;   // deg (directional) or mm (point); see LightFit
   std::string residual_unit;

@@ -4,7 +4,8 @@
 // the cone of rays tangent to a sphere of the known radius), its specular highlight is found to
 // sub-pixel precision, and the view ray is reflected about the sphere's normal there. A distant
 // light's direction is the mean of the reflected rays over placements; a point light lies where
-// the reflected rays of two or more placements meet (least squares).
+// the reflected rays of two or more placements meet (least squares); with one placement it lies on
+// that placement's ray, at the distance its flat frame gives (light_from_plane.h, wired in calibrate.cc).
 
 #include <Eigen/Core>
 #include <optional>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "capture/camera_model.h"
+#include "capture/light_from_plane.h"
 #include "capture/manifest.h"
 #include "core/image.h"
 #include "core/stack.h"
@@ -50,6 +52,11 @@ struct LightFitOptions {
   // cannot (one placement of distant lights: a shift of the centre and a turn of every direction
   // look the same).
   double centre_prior_sigma_of_radius = 0.05;
+  // A point light seen on ONE sphere placement: its distance along the sphere's reflected ray from
+  // the shading of its flat frame (white target on the sample plane, light_from_plane.h), when
+  // the capture has one; otherwise (or when that fit is ill-conditioned) the manifest's distance.
+  bool distance_from_flat = true;
+  PlaneLightFitOptions plane;
 };
 
 // Locates the sphere and its highlight in a linear frame of `camera` (pose known). `known_centre`
