@@ -18,6 +18,7 @@ struct SynthOptions {
   int height = 64;
   std::uint64_t seed = 1;
   double dpi = 300.0;           // the top camera's ground resolution and the scene's grid
+  int lights = 0;               // light count, 0 = the rig preset's own (RigOptions::lights)
   CaptureOptions capture;
   // Throws InputError naming the option (e.g. "--scene") and what was expected.
   void Check() const;
