@@ -21,7 +21,9 @@ TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double 
   // Even bands: the same number of rows in each (the budget is an upper bound).
   plan.band_rows = (grid.height + plan.bands - 1) / plan.bands;
   const double sample_budget = kSampleShareOfBudget * budget_bytes;
-  plan.sample_step = std::max(2, static_cast<int>(std::ceil(std::sqrt(plan.whole_stack_bytes / sample_budget))));
+  int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(plan.whole_stack_bytes / sample_budget))));
+  while (step > 1 && pixels / (static_cast<double>(step) * step) < kMinSamplePixels) --step;
+  plan.sample_step = step;
   return plan;
 }
 

@@ -21,8 +21,11 @@ inline constexpr double kWorkingBytesPerPixel = 128.0;
 // cut the same way (and gives the same material) everywhere. 4 GiB keeps a 36 MP, 32-light scan in
 // three bands with everything else (~3 GiB of full-size maps) well inside 24 GiB.
 inline constexpr double kDefaultStackBudgetGiB = 4.0;
-// The fit's sample (every k-th row and column) gets this share of the budget.
+// The fit's sample (every k-th row and column) gets this share of the budget...
 inline constexpr double kSampleShareOfBudget = 0.25;
+// ...but keeps at least this many pixels (k is lowered, down to 1, until it does): k-means takes up
+// to 20000 candidates (ClusteringOptions::max_samples), which a smaller sample would not have.
+inline constexpr double kMinSamplePixels = 20000.0;
 
 struct TilePlan {
   int bands = 1;            // 1: the whole stack at once (the untiled path)
@@ -33,6 +36,8 @@ struct TilePlan {
 };
 
 // observations: of the side's stack; flats: whether observations carry a measured irradiance.
+// sample_step is the largest k whose sample fits kSampleShareOfBudget of the budget, lowered until
+// the sample has kMinSamplePixels (1 on small grids: the sample is the whole grid).
 TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes);
 
 // Rows [row0, row0 + rows) of every channel of an image.
