@@ -783,4 +783,15 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   return result;
 }
 
+PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
+                                                 const Image& height_mm) {
+  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
+  CheckStack(stack, options);
+  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
+    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
+  }
+  const Solver solver(stack, options);
+  return SolveAt(solver, stack, options, height_mm);
+}
+
 }  // namespace u3mscan::reconstruction

@@ -135,4 +135,11 @@ struct PhotometricStereoResult {
 PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const PhotometricStereoOptions& options,
                                              const ProgressCallback& progress = {});
 
+// One solve with every pixel at the given height (1 channel on the grid, mm), no refinement: the
+// step RunPhotometricStereo repeats, for callers that integrate the heights themselves (the tiled
+// pipeline solves band by band and integrates the whole map between rounds). height_mm is left
+// empty in the result. Throws like RunPhotometricStereo, and when height_mm is not on the grid.
+PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
+                                                 const Image& height_mm);
+
 }  // namespace u3mscan::reconstruction
