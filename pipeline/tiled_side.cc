@@ -135,7 +135,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                            const ProgressCallback& progress) {
   TiledSide out;
   const MetricGrid& grid = prepared.calibration.grid;
-  const reconstruction::PhotometricStereoOptions& ps_options = options.photometric_stereo;
+  // A copy: the diffuse roughness, once chosen on the sample, is fixed for every band.
+  reconstruction::PhotometricStereoOptions ps_options = options.photometric_stereo;
   Bands bands(prepared, side, options, plan);
   std::vector<std::size_t> frames = SideSampleFrames(prepared.capture.manifest(), side);
   const int step = plan.sample_step;
@@ -162,14 +163,42 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     return full;
   };
 
-  // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
-  PhotometricStereoResult ps = solve_sweep(nullptr, &out.sample, "photometric stereo");
-  const std::vector<std::size_t> kept = CheckSideStack(prepared, side, options, &out.sample, report);
-  if (kept.size() != frames.size()) {
+  // The Burley diffuse roughness is one value for the whole side (RunPhotometricStereo estimates it
+  // on the whole stack): when it is to be estimated, the first sweep only gathers the sample, the
+  // roughness is chosen on it, and every band is then solved with that value. Estimating it per
+  // band would give each band its own lobe (and a band solved without it, Lambert's law).
+  const bool choose_roughness = ps_options.diffuse_model == reconstruction::DiffuseModel::kBurley &&
+                                ps_options.diffuse_roughness < 0.0;
+  auto keep_checked_frames = [&] {
+    const std::vector<std::size_t> kept = CheckSideStack(prepared, side, options, &out.sample, report);
+    if (kept.size() == frames.size()) return false;
     std::vector<std::size_t> kept_frames;
     for (std::size_t k : kept) kept_frames.push_back(frames[k]);
     frames = std::move(kept_frames);
-    ps = solve_sweep(nullptr, nullptr, "photometric stereo");  // again without the frames left out
+    return true;
+  };
+  PhotometricStereoResult ps;
+  if (choose_roughness) {
+    for (int b = 0; b < bands.count(); ++b) {
+      AddToSample(bands.Build(frames, b), bands.Row0(b), step, sample_grid, &out.sample);
+      ReportProgress(progress, "photometric stereo (sample)", static_cast<double>(b + 1) / bands.count());
+    }
+    keep_checked_frames();
+    const double start = StageClock();
+    const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
+    solve_seconds += StageClock() - start;
+    if (roughness < 0.0) {
+      ps_options.diffuse_model = reconstruction::DiffuseModel::kLambert;
+      LogInfo() << "photometric stereo: Lambert's law fits the sample better than any Burley diffuse lobe";
+    } else {
+      ps_options.diffuse_roughness = roughness;
+      LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
+    }
+    ps = solve_sweep(nullptr, nullptr, "photometric stereo");
+  } else {
+    // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
+    ps = solve_sweep(nullptr, &out.sample, "photometric stereo");
+    if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, "photometric stereo");  // without the frames left out
   }
   const bool near = std::any_of(out.sample.lights.begin(), out.sample.lights.end(),
                                 [](const LightModel& l) { return l.type == LightType::kPoint; });
@@ -202,6 +231,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   if (near && ps.height_mm.empty()) {
     ps.height_mm = Image(grid.width, grid.height, 1, static_cast<float>(ps_options.integration.mean_height_mm), grid.pitch_mm);
   }
+  ps.diffuse_roughness =
+      ps_options.diffuse_model == reconstruction::DiffuseModel::kBurley ? ps_options.diffuse_roughness : -1.0;
   const int ps_builds = bands.builds();
   report->steps.push_back({"rectify " + side, true,
                            std::to_string(frames.size()) + " observations on a " + std::to_string(grid.width) + "x" +
