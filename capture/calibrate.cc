@@ -1,4 +1,5 @@
 #include "capture/calibrate.h"
+#include "capture/stack_builder.h"
 
 #include <algorithm>
 #include <cmath>
@@ -714,18 +715,7 @@ Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const Calibr
     // Frame units -> f * cos * E_rel: divide by exposure and the light's intensity per channel, then
     // take the camera's RGB to linear sRGB.
     Image& rgb = rectified.rgb;
-    const Eigen::Vector3d scale = (spec.exposure_s * light->model.intensity_rgb).cwiseInverse();
-    ParallelFor(rgb.pixel_count(), [&](std::size_t begin, std::size_t end) {
-      float* r = rgb.plane(0).data();
-      float* g = rgb.plane(1).data();
-      float* b = rgb.plane(2).data();
-      for (std::size_t i = begin; i < end; ++i) {
-        Eigen::Vector3f v(static_cast<float>(r[i] * scale[0]), static_cast<float>(g[i] * scale[1]),
-                          static_cast<float>(b[i] * scale[2]));
-        if (colour) v = colour_matrix * v;
-        r[i] = v[0], g[i] = v[1], b[i] = v[2];
-      }
-    });
+    NormaliseObservationRgb(rgb, spec.exposure_s, light->model.intensity_rgb, colour, colour_matrix);
     observation.rgb = std::move(rgb);
     observation.flags = std::move(rectified.flags);
     if (const FlatCalibration* flat = calibration.FindFlat(spec.camera, *spec.light, spec.side)) {

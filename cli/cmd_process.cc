@@ -52,6 +52,11 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_option("--fit-mode", args->options.fit_mode,
                  "Override the preset's fit: clusters (cluster values only) | per-pixel (refined per pixel)")
       ->check(CLI::IsMember({"clusters", "per-pixel"}));
+  sub.add_option("--max-memory", args->options.max_memory_gib,
+                 "Memory budget (GiB) of one band's stack: a larger scan is processed in bands of rows "
+                 "(docs/process.md, Large scans)")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-6, 1e6));
   sub.add_option("--name", args->name, "File name of the material (one capture only; default: the capture folder's name)");
   sub.add_option("--id", args->id, "Material id (a lowercase version-4 UUID) instead of a new random one");
   sub.add_option("--created", args->created, "Creation time (UTC, 2026-11-22T10:00:00Z) instead of now");

@@ -38,6 +38,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
   sub.add_option("--scene", args->options.scene, "Scene preset (plain, twill, satin, knit, denim, velvet, lace, ...)")->required();
   sub.add_option("--rig", args->options.rig, "Rig preset (distant, near, oblique, grazing, coplanar, single_light, noisy)")->required();
   sub.add_option("--size", args->size, "Camera frame size WxH in pixels (64x64 .. 7360x4912 and beyond)")->capture_default_str();
+  sub.add_option("--lights", args->options.lights, "Number of lights on the rig's rings (0 = the rig's own count)")->capture_default_str();
   sub.add_option("--seed", args->options.seed, "Seed of scene, rig and noise")->capture_default_str();
   sub.add_option("--format", args->format, "Frame files: dng (Bayer RAW), tiff (16-bit RGB) or exr (float RGB)")->capture_default_str();
   sub.add_option("--dpi", args->options.dpi, "Ground resolution of the top camera and the scene grid")->capture_default_str();

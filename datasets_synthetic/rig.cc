@@ -130,9 +130,12 @@ RigLight PointLight(int index, double elevation_deg, double azimuth_deg, double 
   return light;
 }
 
-void AddRings(Rig* rig, bool point, const std::vector<double>& elevations_deg, int per_ring, Jitter& jitter) {
+// `count` lights over the rings: each ring gets count / rings, the first count % rings rings one more.
+void AddRings(Rig* rig, bool point, const std::vector<double>& elevations_deg, int count, Jitter& jitter) {
   int index = static_cast<int>(rig->lights.size());
-  for (std::size_t ring = 0; ring < elevations_deg.size(); ++ring) {
+  const int rings = static_cast<int>(elevations_deg.size());
+  for (int ring = 0; ring < rings; ++ring) {
+    const int per_ring = count / rings + (ring < count % rings ? 1 : 0);
     for (int k = 0; k < per_ring; ++k) {
       // Rings are offset by half a step so no two lights share an azimuth.
       const double azimuth = 360.0 * (k + 0.5 * (ring % 2)) / per_ring + jitter.Uniform(-2, 2);
@@ -165,14 +168,15 @@ Rig MakeRig(const std::string& name, const RigOptions& options) {
   rig.ground_pitch_mm = options.pitch_mm;
   rig.cameras.push_back(TopCamera(options, jitter));
   RigCamera& top = rig.cameras[0];
+  auto count = [&](int preset_default) { return options.lights > 0 ? options.lights : preset_default; };
 
   if (name == "distant") {
     top.vignetting = VignettingModel::kCos4;
-    AddRings(&rig, false, {30.0, 60.0}, 8, jitter);
+    AddRings(&rig, false, {30.0, 60.0}, count(16), jitter);
   } else if (name == "near" || name == "oblique" || name == "noisy") {
     top.vignetting = VignettingModel::kPolynomial;
     top.vignetting_poly = {-0.12, 0.02};
-    AddRings(&rig, true, {30.0, 55.0}, 8, jitter);
+    AddRings(&rig, true, {30.0, 55.0}, count(16), jitter);
     if (name == "oblique") rig.cameras.push_back(ObliqueCamera(rig.cameras[0], 60.0 + jitter.Uniform(-5, 5), jitter));
     if (name == "noisy") {
       rig.sensor.full_well_e = 1500.0;
@@ -182,19 +186,24 @@ Rig MakeRig(const std::string& name, const RigOptions& options) {
   } else if (name == "grazing") {
     top.vignetting = VignettingModel::kCos4;
     // A horizontal white plane reads 0.15: facets tilted toward a 5 deg light get several times more.
-    for (int k = 0; k < 12; ++k) {
-      rig.lights.push_back(DirectionalLight(k, 5.0, 30.0 * k + jitter.Uniform(-2, 2), 0.15, rig.exposure_s, jitter));
+    const int n = count(12);
+    for (int k = 0; k < n; ++k) {
+      rig.lights.push_back(DirectionalLight(k, 5.0, 360.0 * k / n + jitter.Uniform(-2, 2), 0.15, rig.exposure_s, jitter));
     }
   } else if (name == "coplanar") {
     top.vignetting = VignettingModel::kCos4;
     // Every direction within ~0.5 deg of the x-z plane: photometric stereo is ill-conditioned in y.
-    for (int k = 0; k < 12; ++k) {
-      const double elevation = 20.0 + 140.0 * k / 11.0;  // 20..160 deg along the x-z great circle
+    const int n = count(12);
+    for (int k = 0; k < n; ++k) {
+      const double elevation = 20.0 + 140.0 * k / std::max(1, n - 1);  // 20..160 deg along the x-z great circle
       const double azimuth = (elevation <= 90.0 ? 0.0 : 180.0) + jitter.Uniform(-0.5, 0.5);
       const double e = elevation <= 90.0 ? elevation : 180.0 - elevation;
       rig.lights.push_back(DirectionalLight(k, e, azimuth, kWhiteLevel, rig.exposure_s, jitter));
     }
   } else if (name == "single_light") {
+    if (options.lights != 0 && options.lights != 8) {
+      throw std::invalid_argument("rig 'single_light' has exactly 8 lights (one per aim point)");
+    }
     top.vignetting = VignettingModel::kPolynomial;
     top.vignetting_poly = {-0.12, 0.02};
     // Eight narrow spots, each aimed at its own part of the sample: most pixels get a usable

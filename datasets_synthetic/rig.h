@@ -80,7 +80,11 @@ struct RigOptions {
   int height = 64;
   double pitch_mm = 25.4 / 300.0;  // footprint of one pixel of the top camera at the sample centre
   std::uint64_t seed = 1;
-  bool Check() const { return width >= 8 && height >= 8 && pitch_mm > 0; }
+  // Number of lights; 0 = the preset's own count (16 on distant/near/oblique/noisy, 12 on grazing and
+  // coplanar, 8 on single_light). Ring rigs share the lights over their rings (the first rings take the
+  // remainder); grazing and coplanar space them evenly along their circle; single_light has 8 aims only.
+  int lights = 0;
+  bool Check() const { return width >= 8 && height >= 8 && pitch_mm > 0 && lights >= 0; }
 };
 
 // distant, near, oblique, and the extreme presets grazing, coplanar, single_light, noisy.

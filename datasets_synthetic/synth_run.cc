@@ -28,6 +28,15 @@ void SynthOptions::Check() const {
   if (width < kMinSide || height < kMinSide || width > kMaxSide || height > kMaxSide) {
     throw InputError("--size", "", "WxH with each side in [" + std::to_string(kMinSide) + ", " + std::to_string(kMaxSide) + "]");
   }
+  // Photometric stereo needs 3 lights; 256 keeps the ids L00..L255 and the stack size sane.
+  constexpr int kMinLights = 3, kMaxLights = 256;
+  if (lights != 0 && (lights < kMinLights || lights > kMaxLights)) {
+    throw InputError("--lights", "", "0 (the rig's own count) or a count in [" + std::to_string(kMinLights) + ", " +
+                                         std::to_string(kMaxLights) + "], got " + std::to_string(lights));
+  }
+  if (rig == "single_light" && lights != 0 && lights != 8) {
+    throw InputError("--lights", "", "8 (or 0) for rig single_light, which has one light per aim point");
+  }
   if (!(dpi >= 10.0 && dpi <= 20000.0)) throw InputError("--dpi", "", "a resolution in [10, 20000] dots per inch");
   if (supersample < 0 || supersample > kMaxSupersample) {
     throw InputError("--supersample", "", "0 (auto) or rays per pixel axis in [1, " + std::to_string(kMaxSupersample) + "]");
@@ -63,6 +72,7 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   rig_options.height = options.height;
   rig_options.pitch_mm = DpiToPitchMm(options.dpi);
   rig_options.seed = options.seed;
+  rig_options.lights = options.lights;
   const Rig rig = MakeRig(options.rig, rig_options);
   SceneOptions scene_options;
   scene_options.width = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.width)));

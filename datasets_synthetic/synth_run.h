@@ -25,6 +25,7 @@ struct SynthOptions {
   // is sampled as many times finer than the output grid, memory permitting (SceneOversample).
   // 0 = AutoSupersample of the frame size. capture.supersample is overwritten with the choice.
   int supersample = 0;
+  int lights = 0;               // light count, 0 = the rig preset's own (RigOptions::lights)
   CaptureOptions capture;
   // Throws InputError naming the option (e.g. "--scene") and what was expected.
   void Check() const;

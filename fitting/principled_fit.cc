@@ -1,4 +1,5 @@
 #include "fitting/principled_fit.h"
+#include "fitting/tiled_fit.h"
 
 #include <ceres/ceres.h>
 
@@ -881,39 +882,49 @@ bool FitOptions::Check() const {
          unreliable_pixel_share >= 0.0 && unreliable_pixel_share < 1.0;
 }
 
-FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
-                        const ProgressCallback& progress) {
-  const auto t_start = Clock::now();
-  ValidateInputs(stack, geometry, options);
-  FitResult result;
-  result.options = options;
-  const MetricGrid& grid = stack.grid;
-  const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
-
+// Per-observation constants of `stack` with the given noise levels (MedianLuminance of the stack
+// itself when `levels` is empty: an observation without signal borrows the typical level, so that
+// its noise floor, and with it every weight, stays finite).
+namespace {
+FitContext MakeContext(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                       const std::vector<double>& levels) {
   FitContext context;
   context.stack = &stack;
   context.geometry = &geometry;
   context.options = &options;
-  std::vector<double> levels;
-  for (const Observation& o : stack.observations) {
+  const std::size_t pixel_count = static_cast<std::size_t>(stack.grid.width) * stack.grid.height;
+  std::vector<double> positive;
+  for (std::size_t k = 0; k < stack.observations.size(); ++k) {
+    const Observation& o = stack.observations[k];
     ObservationInfo info;
     info.observation = &o;
     info.light = &stack.lights[o.light];
     info.view = &stack.views[o.view];
-    info.level = MedianLuminance(o, pixel_count);
-    if (info.level > 0.0) levels.push_back(info.level);
+    info.level = levels.empty() ? MedianLuminance(o, pixel_count) : levels[k];
+    if (info.level > 0.0) positive.push_back(info.level);
     context.observations.push_back(info);
   }
-  // An observation without signal (light blocked, dark frame) borrows the typical level, so that
-  // its noise floor, and with it every weight, stays finite.
   double typical_level = 1.0;
-  if (!levels.empty()) {
-    std::nth_element(levels.begin(), levels.begin() + levels.size() / 2, levels.end());
-    typical_level = levels[levels.size() / 2];
+  if (!positive.empty()) {
+    std::nth_element(positive.begin(), positive.begin() + positive.size() / 2, positive.end());
+    typical_level = positive[positive.size() / 2];
   }
   for (ObservationInfo& info : context.observations) {
     if (!(info.level > 0.0)) info.level = typical_level;
   }
+  return context;
+}
+}  // namespace
+
+ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                             const ProgressCallback& progress) {
+  ValidateInputs(stack, geometry, options);
+  ClusterModel model;
+  model.options = options;
+  const MetricGrid& grid = stack.grid;
+  const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
+  const FitContext context = MakeContext(stack, geometry, options, {});
+  for (const ObservationInfo& info : context.observations) model.observation_levels.push_back(info.level);
   const std::size_t n_obs = stack.observations.size();
 
   // 1. Gather: features of an evenly strided candidate set of pixels.
@@ -931,13 +942,13 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       valid[i] = count >= options.min_observations ? 1 : 0;
     }
   });
-  result.times.gather_s = Seconds(t);
+  model.times.gather_s = Seconds(t);
 
   // 2. Clustering of the candidates.
   t = Clock::now();
   ReportProgress(progress, "fit: clustering", 0.0);
   const Clustering clustering = ClusterPixels(features, kAppearanceFeatureCount, valid, options.clustering);
-  result.times.clustering_s = Seconds(t);
+  model.times.clustering_s = Seconds(t);
   const int k = clustering.cluster_count;
   if (k == 0) throw std::invalid_argument("FitPrincipled: no pixel has enough usable observations");
 
@@ -948,7 +959,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     if (clustering.labels[i] >= 0) members[clustering.labels[i]].push_back(candidates[i]);
   }
   std::vector<ClusterSamples> samples(k);
-  result.clusters.resize(k);
+  model.clusters.resize(k);
   std::vector<double> observability_s(k, 0.0);
   std::atomic<int> done{0};
   std::mutex progress_mutex;
@@ -966,7 +977,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         s.offsets.push_back(s.observations.size());
         s.luminance_start.push_back(0.2);
       }
-      result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
+      model.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
       std::size_t saturated = 0, seen = 0;  // over the sampled pixels' observations
       for (std::size_t j = 0; j < take; ++j) {
         const std::size_t index = m[j * m.size() / take];
@@ -983,7 +994,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         ParameterVector params;
         ParameterMask free{};
         for (int i = 0; i < kFitParameterCount; ++i) {
-          const ParameterEstimate& e = result.clusters[c].parameters[i];
+          const ParameterEstimate& e = model.clusters[c].parameters[i];
           params[i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
           free[i] = e.measured;
         }
@@ -993,7 +1004,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
           const std::size_t index = m[j * m.size() / take];
           if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
           const PixelCostSettings settings =
-              Settings(options, params, free, std::max(kMinStartLuminance, Luminance(result.clusters[c].mean_base_color)));
+              Settings(options, params, free, std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color)));
           const Eigen::Vector3d n = RefineNormal(context, index, params, settings, buffer.data(), scratch);
           const int count = GatherPixelWithNormal(context, index, n, buffer.data(), nullptr);
           if (count < options.min_observations) continue;
@@ -1003,21 +1014,21 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         }
         s = std::move(refined);
         double pass_observability_s = 0.0;
-        result.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
+        model.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
         observability_s[c] += pass_observability_s;
       }
-      result.clusters[c].saturated_share = saturated_share;
+      model.clusters[c].saturated_share = saturated_share;
       std::lock_guard lock(progress_mutex);
       ReportProgress(progress, "fit: clusters", static_cast<double>(++done) / k);
     }
   });
-  result.times.cluster_fit_s = Seconds(t);
-  for (double s : observability_s) result.times.observability_s += s;
-  for (const ClusterFit& c : result.clusters) {
+  model.times.cluster_fit_s = Seconds(t);
+  for (double s : observability_s) model.times.observability_s += s;
+  for (const ClusterFit& c : model.clusters) {
     if (!c.converged) {
-      result.convergence.all_converged = false;
-      ++result.convergence.clusters_failed;
-      result.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
+      model.convergence.all_converged = false;
+      ++model.convergence.clusters_failed;
+      model.convergence.messages.push_back("cluster " + std::to_string(c.id) + ": " + c.message);
       LogWarning() << "fitting: cluster " << c.id << " did not converge: " << c.message;
     }
     if (c.rms_relative_residual > MismatchThreshold(options)) {
@@ -1026,7 +1037,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
                     "cluster %d: likely model mismatch, relative RMS residual %.3g > %.3g (the Principled model does "
                     "not explain these pixels; expect biased parameters)",
                     c.id, c.rms_relative_residual, MismatchThreshold(options));
-      result.convergence.messages.push_back(buffer);
+      model.convergence.messages.push_back(buffer);
       LogWarning() << "fitting: " << buffer;
     }
   }
@@ -1035,7 +1046,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   // geometry below the pixel) measures nothing: its parameters would be reported with errors far
   // above their posterior std (grazing rig: roughness 0.06 for 0.6 at a relative RMS residual of
   // 0.18-0.89). Left out with the reason; the cluster's pixels keep the defaults.
-  for (ClusterFit& c : result.clusters) {
+  for (ClusterFit& c : model.clusters) {
     if (!(c.rms_relative_residual > options.unusable_relative_rms)) continue;
     char buffer[220];
     std::snprintf(buffer, sizeof buffer,
@@ -1053,7 +1064,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
   // Reliability of what the clusters measured (FitOptions, "Reliability"): evidence that the value
   // may be off by more than its posterior std, which assumes the model fits and the data cover it.
   for (int c = 0; c < k; ++c) {
-    ClusterFit& f = result.clusters[c];
+    ClusterFit& f = model.clusters[c];
     ParameterVector params;
     ParameterMask measured{};
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1088,35 +1099,65 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     }
   }
 
+  model.clustering = clustering;
   // Which maps exist: a parameter measured in at least one cluster (elsewhere it holds its default).
-  std::array<bool, kFitParameterCount> measured_any{};
   for (int i = 0; i < kFitParameterCount; ++i) {
-    for (const ClusterFit& c : result.clusters) measured_any[i] = measured_any[i] || c.parameters[i].measured;
+    for (const ClusterFit& c : model.clusters) model.measured_any[i] = model.measured_any[i] || c.parameters[i].measured;
   }
+  return model;
+}
+
+FitResult StartPixelMaps(const ClusterModel& model, const MetricGrid& grid) {
+  FitResult result;
+  result.options = model.options;
+  result.clusters = model.clusters;
+  result.convergence = model.convergence;
+  result.times = model.times;
+  result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
+  result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    if (!model.measured_any[i]) continue;  // left out: no image at all (memory at 36 MP)
+    result.parameter_maps[i] =
+        Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
+  }
+  return result;
+}
+
+void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeometry& geometry, int row0,
+                  FitResult* out, PixelTally* tally, const ProgressCallback& progress) {
+  const FitOptions& options = model.options;
+  ValidateInputs(band, geometry, options);
+  FitResult& result = *out;
+  const MetricGrid& grid = band.grid;
+  if (grid.width != result.base_color.width() || row0 < 0 || row0 + grid.height > result.base_color.height()) {
+    throw std::invalid_argument("FitPixelRows: the band does not lie inside the result's grid");
+  }
+  if (band.observations.size() != model.observation_levels.size()) {
+    throw std::invalid_argument("FitPixelRows: the band's observations are not the model's");
+  }
+  const auto t = Clock::now();
+  const FitContext context = MakeContext(band, geometry, options, model.observation_levels);
+  const std::size_t n_obs = band.observations.size();
+  const Clustering& clustering = model.clustering;
+  const int k = static_cast<int>(model.clusters.size());
+  const auto& measured_any = model.measured_any;
   std::vector<ParameterVector> cluster_params(k);
   std::vector<ParameterMask> cluster_measured(k);
   std::vector<double> cluster_luminance(k);
   for (int c = 0; c < k; ++c) {
     for (int i = 0; i < kFitParameterCount; ++i) {
-      const ParameterEstimate& e = result.clusters[c].parameters[i];
+      const ParameterEstimate& e = model.clusters[c].parameters[i];
       cluster_params[c][i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
       cluster_measured[c][i] = e.measured;
     }
-    cluster_luminance[c] = std::max(kMinStartLuminance, Luminance(result.clusters[c].mean_base_color));
+    cluster_luminance[c] = std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color));
   }
+  if (tally->cluster_pixels.size() != static_cast<std::size_t>(k)) tally->cluster_pixels.assign(k, 0);
 
   // 5. Per pixel: label, closed-form base colour, refinement where the data supports it.
-  t = Clock::now();
   ReportProgress(progress, "fit: pixels", 0.0);
-  result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
-  result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
-  for (int i = 0; i < kFitParameterCount; ++i) {
-    if (!measured_any[i]) continue;  // left out: no image at all (memory at 36 MP)
-    result.parameter_maps[i] =
-        Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
-  }
   std::atomic<std::int64_t> fitted{0}, refined{0};
-  std::vector<std::int64_t> cluster_pixels(k, 0);
+  std::vector<std::int64_t>& cluster_pixels = tally->cluster_pixels;
   std::mutex count_mutex;
   std::size_t rows_done = 0;          // under count_mutex
   ParameterVector variance_delta{};  // under count_mutex: sum of (pixel variance - cluster variance)
@@ -1138,7 +1179,7 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         if (count < options.min_observations) {
           if (!geometry.albedo.empty()) {
             for (int ch = 0; ch < 3; ++ch) {
-              result.base_color.at(ch, row, col) = std::clamp(geometry.albedo.at(ch, row, col), 0.0f, 1.0f);
+              result.base_color.at(ch, row0 + row, col) = std::clamp(geometry.albedo.at(ch, row, col), 0.0f, 1.0f);
             }
           }
           continue;
@@ -1168,12 +1209,12 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
         }
         for (int ch = 0; ch < 3; ++ch) {
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
-          result.base_color.at(ch, row, col) = static_cast<float>(v);
+          result.base_color.at(ch, row0 + row, col) = static_cast<float>(v);
         }
         for (int i = 0; i < kFitParameterCount; ++i) {
-          if (measured_any[i]) result.parameter_maps[i].at(0, row, col) = static_cast<float>(params[i]);
+          if (measured_any[i]) result.parameter_maps[i].at(0, row0 + row, col) = static_cast<float>(params[i]);
         }
-        result.cluster_id.at(0, row, col) = static_cast<float>(c);
+        result.cluster_id.at(0, row0 + row, col) = static_cast<float>(c);
       }
     }
     fitted += local_fitted;
@@ -1184,10 +1225,25 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
     rows_done += row_end - row_begin;
     ReportProgress(progress, "fit: pixels", static_cast<double>(rows_done) / grid.height);
   });
-  for (int c = 0; c < k; ++c) result.clusters[c].pixel_count = cluster_pixels[c];
-  result.convergence.pixels_fitted = fitted;
-  result.convergence.pixels_refined = refined;
-  result.times.per_pixel_s = Seconds(t);
+  tally->fitted += fitted;
+  tally->refined += refined;
+  for (int i = 0; i < kFitParameterCount; ++i) tally->variance_delta[i] += variance_delta[i];
+  tally->seconds += Seconds(t);
+}
+
+void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResult* out) {
+  FitResult& result = *out;
+  const FitOptions& options = model.options;
+  const int k = static_cast<int>(model.clusters.size());
+  const auto& measured_any = model.measured_any;
+  const auto& variance_delta = tally.variance_delta;
+  const std::size_t pixel_count = result.base_color.pixel_count();
+  for (int c = 0; c < k; ++c) {
+    result.clusters[c].pixel_count = c < static_cast<int>(tally.cluster_pixels.size()) ? tally.cluster_pixels[c] : 0;
+  }
+  result.convergence.pixels_fitted = tally.fitted;
+  result.convergence.pixels_refined = tally.refined;
+  result.times.per_pixel_s = tally.seconds;
 
   // Map decisions: left out, constant, or texture.
   for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1292,8 +1348,18 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
       for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);
     }
   }
+}
+
+FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                        const ProgressCallback& progress) {
+  const auto t_start = Clock::now();
+  const ClusterModel model = FitClusterModel(stack, geometry, options, progress);
+  FitResult result = StartPixelMaps(model, stack.grid);
+  PixelTally tally;
+  FitPixelRows(model, stack, geometry, 0, &result, &tally, progress);
+  FinishPixelMaps(model, tally, &result);
   result.times.total_s = Seconds(t_start);
-  LogInfo() << "fitting: " << k << " clusters, " << result.convergence.pixels_fitted << " pixels ("
+  LogInfo() << "fitting: " << result.clusters.size() << " clusters, " << result.convergence.pixels_fitted << " pixels ("
             << result.convergence.pixels_refined << " refined) in " << result.times.total_s << " s";
   return result;
 }

@@ -14,6 +14,9 @@
 #include "pipeline/height_reliability.h"
 #include "pipeline/material_writer.h"
 #include "pipeline/stages.h"
+#include "pipeline/tiled_side.h"
+#include "pipeline/tiles.h"
+#include "capture/stack_builder.h"
 #include "u3m/image_io.h"
 #include "u3m/material.h"
 #include "u3m/material_json.h"
@@ -25,6 +28,10 @@ namespace fs = std::filesystem;
 namespace {
 
 // The U3M key of each fitted parameter (fitting::FitParameter order).
+constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
+// Observations the render-residual map of the report averages over (spread over the stack).
+constexpr int kResidualObservations = 6;
+
 constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
 
@@ -116,6 +123,7 @@ bool ProcessOptions::Check(std::string* why) const {
   if (id && !IsUuid4(*id)) return fail("--id must be a version-4 UUID such as 3f2c1a9e-8b7d-4c6e-9a5f-0123456789ab");
   if (created && !ParseUtcTimestamp(*created)) return fail("--created must be a UTC time like 2026-11-22T10:00:00Z");
   if (!solver.empty() && solver != "ls" && solver != "robust") return fail("--solver must be ls or robust");
+  if (!(max_memory_gib > 0.0 && max_memory_gib <= 1e6)) return fail("--max-memory must be a number of GiB in (0, 1e6]");
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
   if (!fit_mode.empty() && fit_mode != "clusters" && fit_mode != "per-pixel") return fail("--fit-mode must be clusters or per-pixel");
   return true;
@@ -163,7 +171,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
-                    {"integrator", reconstruction::IntegratorName(stages.integration.method)}};
+                    {"integrator", reconstruction::IntegratorName(stages.integration.method)},
+                    {"max_memory_gib", options.max_memory_gib}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 
   PreparedCapture prepared = PrepareCapture(job.capture_dir, stages, &report, progress);
@@ -192,8 +201,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   std::vector<DebugMaps> debug;
   nlohmann::json quality = nlohmann::json::object();
 
+  const MetricGrid& grid = prepared.calibration.grid;
   for (const std::string& side : prepared.sides) {
-    Stack stack = BuildSideStack(prepared, side, stages, &report, progress);
 
     // Alpha from the backlight frame of this side, when the capture has one.
     Image alpha;
@@ -208,7 +217,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       const std::size_t index = backlight.front();
       const CameraCalibration* camera = prepared.calibration.FindCamera(prepared.capture.frame(index).camera);
       if (!camera) throw std::logic_error("calibration lacks camera " + prepared.capture.frame(index).camera);
-      const RectificationMap map = BuildRectificationMap(camera->model, stack.grid);
+      const RectificationMap map = BuildRectificationMap(camera->model, grid);
       const RectifiedFrame rectified = Rectify(prepared.capture.LoadFrame(index), map);
       AlphaEstimate estimate = AlphaFromBacklight(rectified.rgb, rectified.flags);
       alpha = std::move(estimate.alpha);
@@ -218,16 +227,43 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                               StageClock() - start});
     }
 
-    SideReconstruction reconstruction = ReconstructSide(stack, stages, alpha, &report, progress);
-    fitting::FitResult fit = FitSide(stack, reconstruction, stages, &report, progress);
+    // The whole side at once when its stack fits the budget, else band by band (tiled_side.h).
+    const std::vector<std::size_t> side_frames = SideSampleFrames(manifest, side);
+    bool flats = false;
+    for (std::size_t index : side_frames) {
+      const FrameSpec& spec = manifest.frames[index];
+      flats = flats || (spec.light && prepared.calibration.FindFlat(spec.camera, *spec.light, side));
+    }
+    const TilePlan plan = PlanTiles(grid, static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB);
+    Stack stack;  // the whole stack (untiled), or the fit's sample (tiled): thumbnails
+    SideReconstruction reconstruction;
+    fitting::FitResult fit;
+    Image residual;
+    double residual_mean = 0.0;
+    if (plan.bands == 1) {
+      stack = BuildSideStack(prepared, side, stages, &report, progress);
+      reconstruction = ReconstructSide(stack, stages, alpha, &report, progress);
+      fit = FitSide(stack, reconstruction, stages, &report, progress);
+      residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
+    } else {
+      TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations, &report, progress);
+      stack = std::move(tiled.sample);
+      reconstruction = std::move(tiled.reconstruction);
+      fit = std::move(tiled.fit);
+      residual = std::move(tiled.residual);
+      residual_mean = tiled.residual_mean;
+    }
+    report.options["tiles_" + side] = {{"bands", plan.bands}, {"band_rows", plan.band_rows},
+                                       {"fit_sample_step", plan.sample_step},
+                                       {"stack_gib", plan.whole_stack_bytes / kGiB}};
 
     // The side's maps for the writer.
     SideMaps maps;
     maps.side = side;
     maps.base_color = fit.base_color.empty() ? reconstruction.photometric_stereo.albedo : fit.base_color;
-    maps.base_color.set_pitch_mm(stack.grid.pitch_mm);
+    maps.base_color.set_pitch_mm(grid.pitch_mm);
     maps.normal = reconstruction.photometric_stereo.normal;
-    maps.normal.set_pitch_mm(stack.grid.pitch_mm);
+    maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
     maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
@@ -248,14 +284,12 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         choice.source = ParameterSource::kMeasured;
         if (choice.reason.empty()) choice.reason = "fitted per pixel: varies more than its noise (texture)";
         choice.map = fit.parameter_maps[p];
-        choice.map.set_pitch_mm(stack.grid.pitch_mm);
+        choice.map.set_pitch_mm(grid.pitch_mm);
       }
       maps.scalars.push_back(std::move(choice));
     }
 
     // Quality figures of this side.
-    double residual_mean = 0.0;
-    Image residual = FitResidualMap(fit, stack, reconstruction, 6, &residual_mean);
     const auto& ps = reconstruction.photometric_stereo;
     double rms = 0.0, weight = 0.0;
     for (const auto& cluster : fit.clusters) {

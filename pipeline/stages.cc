@@ -101,13 +101,11 @@ PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOp
   return PreparedCapture{std::move(capture), std::move(calibration), std::move(sides)};
 }
 
-Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
-                     RunReport* report, const ProgressCallback& progress) {
-  const double start = StageClock();
-  CalibrationOptions calibration_options = options.calibration;
-  calibration_options.side = side;
-  Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress);
-
+std::vector<std::size_t> CheckSideStack(const PreparedCapture& prepared, const std::string& side,
+                                        const StageOptions& options, Stack* stack_in, RunReport* report) {
+  Stack& stack = *stack_in;
+  std::vector<std::size_t> kept_indices;
+  for (std::size_t k = 0; k < stack.observations.size(); ++k) kept_indices.push_back(k);
   // Frames without signal are left out (see kNoSignalFraction).
   if (stack.observations.size() >= 2) {
     std::vector<double> signal(stack.observations.size());
@@ -116,6 +114,7 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
     std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
     const double median = sorted[sorted.size() / 2];
     std::vector<Observation> kept;
+    kept_indices.clear();
     for (std::size_t k = 0; k < signal.size(); ++k) {
       if (median > 0.0 && signal[k] < kNoSignalFraction * median) {
         const Observation& o = stack.observations[k];
@@ -126,6 +125,7 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
         continue;
       }
       kept.push_back(std::move(stack.observations[k]));
+      kept_indices.push_back(k);
     }
     stack.observations = std::move(kept);
   }
@@ -157,6 +157,16 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
                          std::to_string(options.fit.min_observations) +
                          " lights; every pixel is saturated or black in too many frames (lower the exposure or the light intensity)");
   }
+  return kept_indices;
+}
+
+Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
+                     RunReport* report, const ProgressCallback& progress) {
+  const double start = StageClock();
+  CalibrationOptions calibration_options = options.calibration;
+  calibration_options.side = side;
+  Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress);
+  CheckSideStack(prepared, side, options, &stack, report);
   report->steps.push_back({"rectify " + side, true,
                            std::to_string(stack.observations.size()) + " observations on a " +
                                std::to_string(stack.grid.width) + "x" + std::to_string(stack.grid.height) + " grid",
@@ -182,27 +192,34 @@ SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& optio
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
 
+  IntegrateSide(stack.grid, near, options, alpha, &out, report, progress);
+  return out;
+}
+
+void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& options, const Image& alpha,
+                   SideReconstruction* side, RunReport* report, const ProgressCallback& progress) {
+  SideReconstruction& out = *side;
+  const auto& ps = out.photometric_stereo;
   // Valid surface: seen by the camera and not a hole (alpha >= 0.5).
-  out.valid = Image(stack.grid.width, stack.grid.height, 1, 1.0f, stack.grid.pitch_mm);
+  out.valid = Image(grid.width, grid.height, 1, 1.0f, grid.pitch_mm);
   if (!alpha.empty()) {
     auto v = out.valid.plane(0);
     const auto a = alpha.plane(0);
     for (std::size_t i = 0; i < v.size(); ++i) v[i] = a[i] >= 0.5f ? 1.0f : 0.0f;
   }
 
-  start = StageClock();
+  const double start = StageClock();
   if (near && !ps.height_mm.empty() && alpha.empty()) {
     out.height_mm = ps.height_mm;
     report->steps.push_back({"integration", false, "done inside the near-light refinement", 0.0});
   } else {
     reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
-    integration.pitch_mm = stack.grid.pitch_mm;
+    integration.pitch_mm = grid.pitch_mm;
     out.height_mm = reconstruction::IntegrateNormals(ps.normal, out.valid, integration, progress).height_mm;
     report->steps.push_back({"integration (" + reconstruction::IntegratorName(integration.method) + ")", true,
                              alpha.empty() ? "whole grid" : "holes masked out", StageClock() - start});
   }
-  out.height_mm.set_pitch_mm(stack.grid.pitch_mm);
-  return out;
+  out.height_mm.set_pitch_mm(grid.pitch_mm);
 }
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
@@ -225,7 +242,7 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
 }
 
 Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
-                     int max_observations, double* mean_out) {
+                     int max_observations, double* mean_out, std::size_t* pixels_out) {
   const int w = stack.grid.width, h = stack.grid.height;
   Image residual(w, h, 1, 0.0f, stack.grid.pitch_mm);
   std::vector<float> count(static_cast<std::size_t>(w) * h, 0.0f);
@@ -258,6 +275,7 @@ Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const Si
     }
   }
   if (mean_out) *mean_out = pixels ? sum / static_cast<double>(pixels) : 0.0;
+  if (pixels_out) *pixels_out = pixels;
   return residual;
 }
 

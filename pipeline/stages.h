@@ -32,6 +32,13 @@ struct PreparedCapture {
 PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOptions& options, RunReport* report,
                                const ProgressCallback& progress = {});
 
+// The checks BuildSideStack makes on a side's stack (or on a sample of its grid): frames without
+// signal are left out with a warning; InputError when fewer than three lights are left or no pixel
+// has enough lit, unsaturated observations. Returns the indices (into the stack's observations as
+// given) of the observations kept, in order.
+std::vector<std::size_t> CheckSideStack(const PreparedCapture& prepared, const std::string& side,
+                                        const StageOptions& options, Stack* stack, RunReport* report);
+
 Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
                      RunReport* report, const ProgressCallback& progress = {});
 
@@ -44,14 +51,20 @@ struct SideReconstruction {
 SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress = {});
 
+// The integration step of ReconstructSide on side->photometric_stereo (grid: the side's whole grid;
+// near: the stack has point lights): fills side->valid and side->height_mm.
+void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& options, const Image& alpha,
+                   SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 
 // Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
 // over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
 // observation is usable). `mean_out` receives the mean over usable pixels.
+// `pixels_out` (optional) receives the number of usable pixels.
 Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
-                     int max_observations, double* mean_out);
+                     int max_observations, double* mean_out, std::size_t* pixels_out = nullptr);
 
 // Seconds since `start` (a steady clock reading from StageClock()).
 double StageClock();

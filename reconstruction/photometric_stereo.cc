@@ -783,4 +783,31 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   return result;
 }
 
+PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
+                                                 const Image& height_mm) {
+  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
+  CheckStack(stack, options);
+  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
+    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
+  }
+  Solver solver(stack, options);
+  if (options.diffuse_model == DiffuseModel::kBurley) {
+    solver.set_roughness(options.diffuse_roughness >= 0.0
+                             ? options.diffuse_roughness
+                             : EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm));
+  }
+  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm);
+  result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
+  return result;
+}
+
+double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions& options) {
+  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
+  if (options.diffuse_model != DiffuseModel::kBurley) return -1.0;
+  if (options.diffuse_roughness >= 0.0) return options.diffuse_roughness;
+  CheckStack(stack, options);
+  Solver solver(stack, options);
+  return EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm);
+}
+
 }  // namespace u3mscan::reconstruction

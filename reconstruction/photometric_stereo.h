@@ -135,4 +135,20 @@ struct PhotometricStereoResult {
 PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const PhotometricStereoOptions& options,
                                              const ProgressCallback& progress = {});
 
+// kBurley: the diffuse roughness RunPhotometricStereo chooses for this stack (options.diffuse_roughness
+// when given, else the least-residual estimate at the anchor plane, mean_height_mm); -1 when the
+// model is kLambert or Lambert's law fits better. The tiled pipeline estimates it once on its
+// decimated sample and passes it to every band, so that bands agree with each other and with a
+// one-band run.
+double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions& options);
+
+// One solve with every pixel at the given height (1 channel on the grid, mm), no refinement: the
+// step RunPhotometricStereo repeats, for callers that integrate the heights themselves (the tiled
+// pipeline solves band by band and integrates the whole map between rounds). height_mm is left
+// empty in the result. kBurley uses options.diffuse_roughness when given (>= 0), else estimates
+// it on this stack (ChooseDiffuseRoughness). Throws like RunPhotometricStereo, and when height_mm
+// is not on the grid.
+PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
+                                                 const Image& height_mm);
+
 }  // namespace u3mscan::reconstruction

@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
+#include <set>
 #include <string>
 
 #include "capture/manifest.h"
 #include "core/error.h"
+#include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/truth_writer.h"
 
 namespace u3mscan::synthetic {
@@ -43,6 +46,18 @@ TEST(SynthRunTest, BadOptionsNameTheOption) {
       EXPECT_EQ(e.file(), "--supersample");
     }
   }
+  options.supersample = 0;
+  options.lights = 2;  // photometric stereo needs three
+  try {
+    options.Check();
+    FAIL() << "accepted 2 lights";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "--lights");
+  }
+  options.lights = 32;
+  EXPECT_NO_THROW(options.Check());
+  options.rig = "single_light";  // one light per aim point: only its own 8
+  EXPECT_THROW(options.Check(), InputError);
 }
 
 TEST(SynthRunTest, AutoSupersampleAndSceneOversampleKeepMemoryBounded) {
@@ -58,6 +73,42 @@ TEST(SynthRunTest, AutoSupersampleAndSceneOversampleKeepMemoryBounded) {
     const int f = SceneOversample(3, side, side);
     EXPECT_LE(18.0 * sizeof(float) * side * side * f * f, kMaxFineSceneBytes + (f == 1 ? 1e12 : 0.0)) << side;
   }
+}
+
+// --lights N: N lights on the rig's rings, unique ids, the default count unchanged, and the ring
+// elevations kept (each light within the preset's +-2 deg elevation jitter of one of its rings).
+TEST(SynthRunTest, LightCountSpreadsOverTheRings) {
+  RigOptions options;
+  const Rig preset = MakeRig("near", options);
+  EXPECT_EQ(preset.lights.size(), 16u);
+  options.lights = 16;
+  const Rig sixteen = MakeRig("near", options);
+  ASSERT_EQ(sixteen.lights.size(), 16u);
+  for (std::size_t i = 0; i < 16; ++i) EXPECT_EQ(sixteen.lights[i].position_mm, preset.lights[i].position_mm) << i;
+
+  constexpr double kRingJitterDeg = 2.0 + 1e-9;  // AddRings' elevation jitter, plus rounding
+  for (const char* name : {"near", "distant"}) {
+    options.lights = 33;  // odd: the first ring takes 17
+    const Rig rig = MakeRig(name, options);
+    ASSERT_EQ(rig.lights.size(), 33u) << name;
+    std::set<std::string> ids;
+    int low_ring = 0;
+    for (const RigLight& light : rig.lights) {
+      ids.insert(light.id);
+      const Eigen::Vector3d dir = light.type == RigLightType::kPoint ? light.position_mm.normalized() : light.direction;
+      const double elevation = std::asin(dir.z()) * 180.0 / M_PI;
+      const bool on_low = std::abs(elevation - 30.0) <= kRingJitterDeg;
+      const double high = std::string(name) == "near" ? 55.0 : 60.0;
+      EXPECT_TRUE(on_low || std::abs(elevation - high) <= kRingJitterDeg) << name << " " << light.id << " " << elevation;
+      low_ring += on_low;
+    }
+    EXPECT_EQ(ids.size(), 33u) << name;
+    EXPECT_EQ(low_ring, 17) << name;
+  }
+  options.lights = 20;
+  EXPECT_EQ(MakeRig("grazing", options).lights.size(), 20u);
+  EXPECT_EQ(MakeRig("coplanar", options).lights.size(), 20u);
+  EXPECT_THROW(MakeRig("single_light", options), std::invalid_argument);
 }
 
 // A real scene preset end to end at the tiny size: the capture reads back and covers the scene.

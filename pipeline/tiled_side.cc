@@ -1,0 +1,318 @@
+#include "pipeline/tiled_side.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "capture/stack_builder.h"
+#include "core/logging.h"
+#include "fitting/tiled_fit.h"
+#include "reconstruction/normal_integration.h"
+#include "reconstruction/photometric_stereo.h"
+
+namespace u3mscan {
+namespace {
+
+using reconstruction::PhotometricStereoResult;
+
+// The band Stacks of one side, built again on every sweep; times the building.
+class Bands {
+ public:
+  Bands(const PreparedCapture& prepared, const std::string& side, const StageOptions& options, const TilePlan& plan)
+      : prepared_(prepared), plan_(plan) {
+    calibration_ = options.calibration;
+    calibration_.side = side;
+  }
+  int count() const { return plan_.bands; }
+  int Row0(int band) const { return band * plan_.band_rows; }
+  int Rows(int band) const { return std::min(plan_.band_rows, prepared_.calibration.grid.height - Row0(band)); }
+  Stack Build(const std::vector<std::size_t>& frames, int band) {
+    const double start = StageClock();
+    Stack stack = BuildStackRows(prepared_.capture, prepared_.calibration, calibration_, frames, Row0(band), Rows(band));
+    build_seconds_ += StageClock() - start;
+    ++builds_;
+    return stack;
+  }
+  double build_seconds() const { return build_seconds_; }
+  int builds() const { return builds_; }
+
+ private:
+  const PreparedCapture& prepared_;
+  const TilePlan& plan_;
+  CalibrationOptions calibration_;
+  double build_seconds_ = 0.0;
+  int builds_ = 0;
+};
+
+// Appends a band's sampled pixels to the sample Stack (allocated on the first band).
+void AddToSample(const Stack& band, int row0, int step, const MetricGrid& sample_grid, Stack* sample) {
+  if (sample->observations.empty()) {
+    sample->side = band.side;
+    sample->grid = sample_grid;
+    sample->lights = band.lights;
+    sample->views = band.views;
+    sample->observations.resize(band.observations.size());
+    for (std::size_t k = 0; k < band.observations.size(); ++k) {
+      sample->observations[k].view = band.observations[k].view;
+      sample->observations[k].light = band.observations[k].light;
+    }
+  }
+  const int o = step / 2;
+  for (std::size_t k = 0; k < band.observations.size(); ++k) {
+    const Observation& from = band.observations[k];
+    Observation& to = sample->observations[k];
+    SampleRows(from.rgb, row0, step, sample_grid, &to.rgb);
+    if (!from.irradiance.empty()) SampleRows(from.irradiance, row0, step, sample_grid, &to.irradiance);
+    if (from.flags.empty()) continue;
+    if (to.flags.empty()) to.flags.assign(static_cast<std::size_t>(sample_grid.width) * sample_grid.height, 0);
+    for (int r = 0; r < band.grid.height; ++r) {
+      const int row = row0 + r;
+      if (row < o || (row - o) % step != 0 || (row - o) / step >= sample_grid.height) continue;
+      const int i = (row - o) / step;
+      for (int j = 0; j < sample_grid.width; ++j) {
+        to.flags[static_cast<std::size_t>(i) * sample_grid.width + j] =
+            from.flags[static_cast<std::size_t>(r) * band.grid.width + o + j * step];
+      }
+    }
+  }
+}
+
+// Full-size photometric stereo maps, filled band by band.
+PhotometricStereoResult EmptyPs(const MetricGrid& grid) {
+  PhotometricStereoResult ps;
+  ps.normal = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
+  ps.albedo = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
+  ps.confidence = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  ps.condition_number = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  ps.used_lights = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  return ps;
+}
+
+void PasteBand(const PhotometricStereoResult& band, int row0, PhotometricStereoResult* full) {
+  PasteRows(band.normal, row0, &full->normal);
+  PasteRows(band.albedo, row0, &full->albedo);
+  PasteRows(band.confidence, row0, &full->confidence);
+  PasteRows(band.condition_number, row0, &full->condition_number);
+  PasteRows(band.used_lights, row0, &full->used_lights);
+  full->ill_conditioned_pixels += band.ill_conditioned_pixels;
+  full->dark_pixels += band.dark_pixels;
+  full->low_albedo_pixels += band.low_albedo_pixels;
+  full->clamped_normal_pixels += band.clamped_normal_pixels;
+  full->regularised_pixels += band.regularised_pixels;
+}
+
+// Mean angle between two normal maps, degrees (as RunPhotometricStereo's refinement measures it).
+double MeanAngleDeg(const Image& a, const Image& b) {
+  const std::size_t n = a.pixel_count();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
+    const Eigen::Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
+    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
+  }
+  return n > 0 ? sum / static_cast<double>(n) * 180.0 / std::numbers::pi : 0.0;
+}
+
+fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
+  fitting::FitResult band;
+  band.base_color = CropRows(fit.base_color, row0, rows);
+  band.cluster_id = CropRows(fit.cluster_id, row0, rows);
+  for (int i = 0; i < fitting::kFitParameterCount; ++i) {
+    if (!fit.parameter_maps[i].empty()) band.parameter_maps[i] = CropRows(fit.parameter_maps[i], row0, rows);
+  }
+  band.maps = fit.maps;
+  band.clusters = fit.clusters;
+  band.options = fit.options;
+  return band;
+}
+
+}  // namespace
+
+TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
+                           const TilePlan& plan, const Image& alpha, int residual_observations, RunReport* report,
+                           const ProgressCallback& progress) {
+  TiledSide out;
+  const MetricGrid& grid = prepared.calibration.grid;
+  // A copy: the diffuse roughness, once chosen on the sample, is fixed for every band.
+  reconstruction::PhotometricStereoOptions ps_options = options.photometric_stereo;
+  Bands bands(prepared, side, options, plan);
+  std::vector<std::size_t> frames = SideSampleFrames(prepared.capture.manifest(), side);
+  const int step = plan.sample_step;
+  const MetricGrid sample_grid = SampleGrid(grid, step);
+  LogInfo() << "process (" << side << "): " << plan.bands << " bands of " << plan.band_rows << " rows ("
+            << plan.whole_stack_bytes / (1 << 30) << " GiB for the whole stack), fit sample every " << step
+            << " pixels (" << sample_grid.width << " x " << sample_grid.height << ")";
+  double solve_seconds = 0.0;
+
+  // One sweep of photometric stereo at the given heights (nullptr: the anchor plane).
+  auto solve_sweep = [&](const Image* height, Stack* sample, const char* stage) {
+    PhotometricStereoResult full = EmptyPs(grid);
+    for (int b = 0; b < bands.count(); ++b) {
+      Stack band = bands.Build(frames, b);
+      if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
+      const double start = StageClock();
+      const Image band_height = height ? CropRows(*height, bands.Row0(b), bands.Rows(b))
+                                       : Image(grid.width, bands.Rows(b), 1,
+                                               static_cast<float>(ps_options.integration.mean_height_mm), grid.pitch_mm);
+      PasteBand(reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height), bands.Row0(b), &full);
+      solve_seconds += StageClock() - start;
+      ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
+    }
+    return full;
+  };
+
+  // The Burley diffuse roughness is one value for the whole side (RunPhotometricStereo estimates it
+  // on the whole stack): when it is to be estimated, the first sweep only gathers the sample, the
+  // roughness is chosen on it, and every band is then solved with that value. Estimating it per
+  // band would give each band its own lobe (and a band solved without it, Lambert's law).
+  const bool choose_roughness = ps_options.diffuse_model == reconstruction::DiffuseModel::kBurley &&
+                                ps_options.diffuse_roughness < 0.0;
+  auto keep_checked_frames = [&] {
+    const std::vector<std::size_t> kept = CheckSideStack(prepared, side, options, &out.sample, report);
+    if (kept.size() == frames.size()) return false;
+    std::vector<std::size_t> kept_frames;
+    for (std::size_t k : kept) kept_frames.push_back(frames[k]);
+    frames = std::move(kept_frames);
+    return true;
+  };
+  PhotometricStereoResult ps;
+  if (choose_roughness) {
+    for (int b = 0; b < bands.count(); ++b) {
+      AddToSample(bands.Build(frames, b), bands.Row0(b), step, sample_grid, &out.sample);
+      ReportProgress(progress, "photometric stereo (sample)", static_cast<double>(b + 1) / bands.count());
+    }
+    keep_checked_frames();
+    const double start = StageClock();
+    const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
+    solve_seconds += StageClock() - start;
+    if (roughness < 0.0) {
+      ps_options.diffuse_model = reconstruction::DiffuseModel::kLambert;
+      LogInfo() << "photometric stereo: Lambert's law fits the sample better than any Burley diffuse lobe";
+    } else {
+      ps_options.diffuse_roughness = roughness;
+      LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
+    }
+    ps = solve_sweep(nullptr, nullptr, "photometric stereo");
+  } else {
+    // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
+    ps = solve_sweep(nullptr, &out.sample, "photometric stereo");
+    if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, "photometric stereo");  // without the frames left out
+  }
+  const bool near = std::any_of(out.sample.lights.begin(), out.sample.lights.end(),
+                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+
+  // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
+  if (near && ps_options.refine_height) {
+    reconstruction::IntegrationOptions integration = ps_options.integration;
+    integration.pitch_mm = grid.pitch_mm;
+    double previous_change = std::numeric_limits<double>::infinity();
+    for (int it = 1; it <= ps_options.max_near_iterations; ++it) {
+      const double start = StageClock();
+      Image height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
+      solve_seconds += StageClock() - start;
+      PhotometricStereoResult next = solve_sweep(&height, nullptr, "photometric stereo (near-light round)");
+      const double change = MeanAngleDeg(next.normal, ps.normal);
+      if (change >= previous_change) {
+        LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
+                     << " deg after " << previous_change << " deg); kept round " << it - 1;
+        break;
+      }
+      previous_change = change;
+      const int rounds = it;
+      ps = std::move(next);
+      ps.height_mm = std::move(height);
+      ps.near_iterations = rounds;
+      ps.last_normal_change_deg = change;
+      if (change < ps_options.near_tolerance_deg) break;
+    }
+  }
+  if (near && ps.height_mm.empty()) {
+    ps.height_mm = Image(grid.width, grid.height, 1, static_cast<float>(ps_options.integration.mean_height_mm), grid.pitch_mm);
+  }
+  ps.diffuse_roughness =
+      ps_options.diffuse_model == reconstruction::DiffuseModel::kBurley ? ps_options.diffuse_roughness : -1.0;
+  const int ps_builds = bands.builds();
+  report->steps.push_back({"rectify " + side, true,
+                           std::to_string(frames.size()) + " observations on a " + std::to_string(grid.width) + "x" +
+                               std::to_string(grid.height) + " grid in " + std::to_string(plan.bands) + " bands of " +
+                               std::to_string(plan.band_rows) + " rows, built " + std::to_string(ps_builds) +
+                               " times for photometric stereo",
+                           bands.build_seconds()});
+  report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(ps_options.solver) + ", tiled)", true,
+                           near ? "near point lights, height refined " + std::to_string(ps.near_iterations) +
+                                      " rounds (one sweep over the bands each)"
+                                : "distant lights",
+                           solve_seconds});
+  if (!near) {
+    report->steps.push_back({"near-light refinement", false,
+                             "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
+  }
+  out.reconstruction.photometric_stereo = std::move(ps);
+  IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
+  const SideReconstruction& geometry = out.reconstruction;
+
+  // Fit: clusters on the sample, then the per-pixel step band by band.
+  if (out.sample.views.size() < 2) {
+    report->steps.push_back({"oblique view", false,
+                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
+  }
+  double start = StageClock();
+  const double build_before_fit = bands.build_seconds();
+  fitting::SurfaceGeometry sample_geometry;
+  SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
+  SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
+  SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);
+  const fitting::ClusterModel model = fitting::FitClusterModel(out.sample, sample_geometry, options.fit, progress);
+  out.fit = fitting::StartPixelMaps(model, grid);
+  fitting::PixelTally tally;
+  for (int b = 0; b < bands.count(); ++b) {
+    const Stack band = bands.Build(frames, b);
+    const int row0 = bands.Row0(b), rows = bands.Rows(b);
+    const fitting::SurfaceGeometry band_geometry{CropRows(geometry.photometric_stereo.normal, row0, rows),
+                                                 CropRows(geometry.photometric_stereo.albedo, row0, rows),
+                                                 CropRows(geometry.height_mm, row0, rows)};
+    fitting::FitPixelRows(model, band, band_geometry, row0, &out.fit, &tally);
+    ReportProgress(progress, "fit: pixels", static_cast<double>(b + 1) / bands.count());
+  }
+  fitting::FinishPixelMaps(model, tally, &out.fit);
+  out.fit.times.total_s = StageClock() - start;
+  std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on every " + std::to_string(step) +
+                       "th row and column, pixels band by band (band rebuild " +
+                       std::to_string(bands.build_seconds() - build_before_fit) + " s included)";
+  if (!out.fit.convergence.all_converged) {
+    detail += ", " + std::to_string(out.fit.convergence.clusters_failed) + " did not converge";
+    for (const auto& message : out.fit.convergence.messages) report->warnings.push_back("fit: " + message);
+  }
+  report->steps.push_back({"fit", true, detail, StageClock() - start});
+
+  // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
+  start = StageClock();
+  const int n = static_cast<int>(frames.size());
+  const int used = std::min(n, std::max(1, residual_observations));
+  std::vector<std::size_t> residual_frames;
+  for (int k = 0; k < used; ++k) residual_frames.push_back(frames[static_cast<std::size_t>(k) * n / used]);
+  out.residual = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  double residual_sum = 0.0;
+  std::size_t residual_pixels = 0;
+  for (int b = 0; b < bands.count(); ++b) {
+    const Stack band = bands.Build(residual_frames, b);
+    const int row0 = bands.Row0(b), rows = bands.Rows(b);
+    SideReconstruction band_geometry;
+    band_geometry.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);
+    band_geometry.photometric_stereo.albedo = CropRows(geometry.photometric_stereo.albedo, row0, rows);
+    band_geometry.height_mm = CropRows(geometry.height_mm, row0, rows);
+    double mean = 0.0;
+    std::size_t pixels = 0;
+    PasteRows(FitResidualMap(BandFit(out.fit, row0, rows), band, band_geometry, used, &mean, &pixels), row0,
+              &out.residual);
+    residual_sum += mean * static_cast<double>(pixels);
+    residual_pixels += pixels;
+  }
+  out.residual_mean = residual_pixels ? residual_sum / static_cast<double>(residual_pixels) : 0.0;
+  report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", StageClock() - start});
+  return out;
+}
+
+}  // namespace u3mscan

@@ -1,0 +1,43 @@
+#pragma once
+// One side of a capture processed band by band (pipeline/tiles.h), for scans whose whole Stack does
+// not fit the memory budget. The same stages as the untiled path (stages.h), in sweeps over the
+// bands; each sweep builds the band Stacks again from the frames (only the camera rows a band
+// needs are read) and drops them:
+//   sweep 1    photometric stereo at the anchor plane, band by band, into full-size maps; the fit's
+//              sample (every k-th row and column, a grid of pitch k p) is copied out on the way and
+//              the side's checks (frames without signal, usable pixels) run on it
+//   sweeps 2.. near point lights: the whole normal map is integrated once per round and every band
+//              solved again at the new heights (RunPhotometricStereo's refinement, round by round)
+//   integration of the whole normal map (as ReconstructSide)
+//   fit        clusters on the sample (fitting/tiled_fit.h FitClusterModel), then one sweep of the
+//              per-pixel step with the clusters fixed (FitPixelRows), then the map decisions
+//   residual   one sweep over the residual map's few observations, after the decisions
+// Photometric stereo is per pixel, so a band's normals equal the untiled ones except for pixels
+// regularised toward their neighbours near a band edge; the fit differs by its clusters (fitted on
+// the sample instead of the whole grid). tests/pipeline/tiled_process_test.cc measures both.
+
+#include <string>
+
+#include "core/progress.h"
+#include "fitting/principled_fit.h"
+#include "pipeline/presets.h"
+#include "pipeline/run_report.h"
+#include "pipeline/stages.h"
+#include "pipeline/tiles.h"
+
+namespace u3mscan {
+
+struct TiledSide {
+  SideReconstruction reconstruction;  // full-size maps
+  fitting::FitResult fit;             // full-size maps
+  Image residual;                     // FitResidualMap over the whole grid
+  double residual_mean = 0.0;
+  Stack sample;                       // the fit's sample of the side's stack (thumbnails)
+};
+
+// Throws InputError as BuildSideStack does.
+TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
+                           const TilePlan& plan, const Image& alpha, int residual_observations, RunReport* report,
+                           const ProgressCallback& progress = {});
+
+}  // namespace u3mscan

@@ -1,0 +1,80 @@
+#include "pipeline/tiles.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace u3mscan {
+
+TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes) {
+  TilePlan plan;
+  const double pixels = static_cast<double>(grid.width) * grid.height;
+  const double per_observation = 12.0 + 1.0 + (flats ? 4.0 : 0.0);
+  plan.bytes_per_pixel = observations * per_observation + kWorkingBytesPerPixel;
+  plan.whole_stack_bytes = plan.bytes_per_pixel * pixels;
+  plan.band_rows = grid.height;
+  if (!(budget_bytes > 0.0) || plan.whole_stack_bytes <= budget_bytes || grid.height < 2) return plan;
+  const double row_bytes = plan.bytes_per_pixel * grid.width;
+  plan.band_rows = std::clamp(static_cast<int>(budget_bytes / row_bytes), 1, grid.height);
+  plan.bands = (grid.height + plan.band_rows - 1) / plan.band_rows;
+  if (plan.bands == 1) return plan;
+  // Even bands: the same number of rows in each (the budget is an upper bound).
+  plan.band_rows = (grid.height + plan.bands - 1) / plan.bands;
+  const double sample_budget = kSampleShareOfBudget * budget_bytes;
+  int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(plan.whole_stack_bytes / sample_budget))));
+  while (step > 1 && pixels / (static_cast<double>(step) * step) < kMinSamplePixels) --step;
+  plan.sample_step = step;
+  return plan;
+}
+
+Image CropRows(const Image& image, int row0, int rows) {
+  if (row0 < 0 || rows < 0 || row0 + rows > image.height()) throw std::out_of_range("CropRows: rows outside the image");
+  Image out(image.width(), rows, image.channels(), 0.0f, image.pitch_mm());
+  const std::size_t w = static_cast<std::size_t>(image.width());
+  for (int c = 0; c < image.channels(); ++c) {
+    const float* src = image.plane(c).data() + static_cast<std::size_t>(row0) * w;
+    std::copy(src, src + static_cast<std::size_t>(rows) * w, out.data().data() + static_cast<std::size_t>(c) * rows * w);
+  }
+  return out;
+}
+
+void PasteRows(const Image& band, int row0, Image* full) {
+  if (band.width() != full->width() || band.channels() != full->channels() || row0 < 0 ||
+      row0 + band.height() > full->height()) {
+    throw std::out_of_range("PasteRows: band does not fit the image");
+  }
+  const std::size_t w = static_cast<std::size_t>(band.width());
+  for (int c = 0; c < band.channels(); ++c) {
+    const float* src = band.plane(c).data();
+    std::copy(src, src + static_cast<std::size_t>(band.height()) * w,
+              full->data().data() + (static_cast<std::size_t>(c) * full->height() + row0) * w);
+  }
+}
+
+MetricGrid SampleGrid(const MetricGrid& grid, int step) {
+  const int o = step / 2;
+  MetricGrid sample;
+  sample.width = std::max(0, (grid.width - o + step - 1) / step);
+  sample.height = std::max(0, (grid.height - o + step - 1) / step);
+  sample.pitch_mm = step * grid.pitch_mm;
+  // Centre of sample pixel 0 = centre of grid pixel o: x0' + k p / 2 = x0 + (o + 1/2) p.
+  sample.x0_mm = grid.x0_mm + (o + 0.5) * grid.pitch_mm - 0.5 * sample.pitch_mm;
+  sample.y1_mm = grid.y1_mm - (o + 0.5) * grid.pitch_mm + 0.5 * sample.pitch_mm;
+  return sample;
+}
+
+void SampleRows(const Image& band, int row0, int step, const MetricGrid& sample_grid, Image* sample) {
+  if (sample->empty()) *sample = Image(sample_grid.width, sample_grid.height, band.channels(), 0.0f, sample_grid.pitch_mm);
+  const int o = step / 2;
+  for (int r = 0; r < band.height(); ++r) {
+    const int row = row0 + r;
+    if (row < o || (row - o) % step != 0) continue;
+    const int i = (row - o) / step;
+    if (i >= sample_grid.height) continue;
+    for (int c = 0; c < band.channels(); ++c) {
+      for (int j = 0; j < sample_grid.width; ++j) sample->at(c, i, j) = band.at(c, r, o + j * step);
+    }
+  }
+}
+
+}  // namespace u3mscan

@@ -1,0 +1,180 @@
+// Large scans in bands of rows (docs/process.md, "Large scans: memory and time"): band stacks equal
+// the same rows of the whole stack, and a run forced into several bands gives the one-band material
+// within named tolerances.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+
+#include "capture/calibrate.h"
+#include "capture/capture.h"
+#include "capture/stack_builder.h"
+#include "datasets_synthetic/synth_run.h"
+#include "pipeline/process.h"
+#include "pipeline/tiles.h"
+#include "u3m/image_io.h"
+
+namespace u3mscan {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TestRoot() { return fs::temp_directory_path() / ("u3mscan_tiled_test_" + std::to_string(getpid())); }
+
+// Near point lights (so the near-light rounds run as sweeps), a textured scene, TIFF frames.
+fs::path MakeCapture(const std::string& name, bool calibration_frames, int lights) {
+  const fs::path dir = TestRoot() / name;
+  synthetic::SynthOptions options;
+  options.scene = "twill";
+  options.rig = "near";
+  options.width = 80;
+  options.height = 64;
+  options.lights = lights;
+  options.capture.format = synthetic::FrameFormat::kTiff;
+  options.capture.calibration_frames = calibration_frames;
+  synthetic::RunSynth(options, dir);
+  return dir / synthetic::kCaptureSubdir;
+}
+
+class TiledTest : public ::testing::Test {
+ protected:
+  static void TearDownTestSuite() {
+    if (!std::getenv("U3MSCAN_KEEP_TEST_OUTPUT")) fs::remove_all(TestRoot());
+  }
+};
+
+// Every observation of every band, bit for bit the same rows of BuildStack's: with dark, ambient
+// and flat-field frames, at the native resolution and on a grid coarse enough for the
+// anti-aliasing pre-filter (whose reach the band's camera rows must cover).
+TEST_F(TiledTest, BandStacksEqualTheRowsOfTheWholeStack) {
+  const fs::path dir = MakeCapture("calibrated", /*calibration_frames=*/true, 6);
+  const Capture capture = Capture::Open(dir);
+  for (const double dpi : {0.0, 100.0}) {
+    CalibrationOptions options;
+    if (dpi > 0.0) options.dpi = dpi;
+    const CalibrationResult calibration = Calibrate(capture, options);
+    ASSERT_FALSE(calibration.flats.empty()) << "the capture should have flat fields";
+    const Stack whole = BuildStack(capture, calibration, options);
+    const std::vector<std::size_t> frames = SideSampleFrames(capture.manifest(), "front");
+    const int h = calibration.grid.height;
+    const int edges[] = {0, h / 3, h / 3 + 1, h};  // a one-row band too
+    for (int b = 0; b + 1 < 4; ++b) {
+      const int row0 = edges[b], rows = edges[b + 1] - edges[b];
+      const Stack band = BuildStackRows(capture, calibration, options, frames, row0, rows);
+      ASSERT_EQ(band.observations.size(), whole.observations.size());
+      EXPECT_DOUBLE_EQ(band.grid.PixelCentreInWorld(0, 0).y(), whole.grid.PixelCentreInWorld(0, row0).y());
+      for (std::size_t k = 0; k < whole.observations.size(); ++k) {
+        const Observation& w = whole.observations[k];
+        const Observation& o = band.observations[k];
+        ASSERT_EQ(o.light, w.light);
+        ASSERT_EQ(o.rgb.height(), rows);
+        int rgb_differ = 0, flags_differ = 0, irradiance_differ = 0;
+        for (int r = 0; r < rows; ++r) {
+          for (int c = 0; c < whole.grid.width; ++c) {
+            for (int ch = 0; ch < 3; ++ch) rgb_differ += o.rgb.at(ch, r, c) != w.rgb.at(ch, row0 + r, c);
+            const std::size_t wi = static_cast<std::size_t>(row0 + r) * whole.grid.width + c;
+            flags_differ += o.flags[static_cast<std::size_t>(r) * whole.grid.width + c] != w.flags[wi];
+            irradiance_differ += o.irradiance.at(0, r, c) != w.irradiance.at(0, row0 + r, c);
+          }
+        }
+        EXPECT_EQ(rgb_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
+        EXPECT_EQ(flags_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
+        EXPECT_EQ(irradiance_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
+      }
+    }
+  }
+}
+
+TEST_F(TiledTest, PlanCutsEvenBandsWithinTheBudget) {
+  MetricGrid grid;
+  grid.width = 5520, grid.height = 3684, grid.pitch_mm = 25.4 / 300;  // 36 MP camera, 75 % of it
+  const double budget = 4.0 * (1 << 30);
+  const TilePlan plan = PlanTiles(grid, 32, false, budget);
+  EXPECT_GT(plan.bands, 1);
+  EXPECT_LE(plan.bytes_per_pixel * grid.width * plan.band_rows, budget);
+  EXPECT_GE(plan.bands * plan.band_rows, grid.height);
+  EXPECT_LT((plan.bands - 1) * plan.band_rows, grid.height);
+  EXPECT_LE(plan.whole_stack_bytes / (plan.sample_step * plan.sample_step), kSampleShareOfBudget * budget);
+  EXPECT_EQ(PlanTiles(grid, 32, false, 1e12).bands, 1);
+  // Sample grid: pixel i sits on grid pixel k i + k/2.
+  const MetricGrid sample = SampleGrid(grid, 4);
+  EXPECT_NEAR(sample.PixelCentreInWorld(3, 5).x(), grid.PixelCentreInWorld(4 * 3 + 2, 0).x(), 1e-9);
+  EXPECT_NEAR(sample.PixelCentreInWorld(3, 5).y(), grid.PixelCentreInWorld(0, 4 * 5 + 2).y(), 1e-9);
+}
+
+Image ReadMap(const fs::path& out, const std::string& name) {
+  return ReadImageFile(out / "maps" / (name + ".exr"), PixelEncoding::kLinear);
+}
+
+// The same capture processed whole and in bands (a tiny --max-memory).
+TEST_F(TiledTest, SeveralBandsGiveTheOneBandMaterial) {
+  const fs::path dir = MakeCapture("plain", /*calibration_frames=*/false, 8);
+  ProcessOptions options;
+  options.preset = Preset::kFast;  // the suite time limit; the per-pixel step is FitPrincipled's own code
+  options.debug_maps = true;
+  options.id = "3f2c1a9e-8b7d-4c6e-9a5f-0123456789ab";
+  options.created = "2026-11-22T10:00:00Z";
+  CaptureJob whole_job{dir, TestRoot() / "whole", "whole"};
+  const ProcessResult whole = ProcessCapture(whole_job, options);
+  ASSERT_EQ(whole.report.options["tiles_front"]["bands"], 1);
+  // About 3 bands: the budget of a third of the whole stack.
+  const double stack_gib = whole.report.options["tiles_front"]["stack_gib"];
+  options.max_memory_gib = stack_gib / 2.5;
+  CaptureJob tiled_job{dir, TestRoot() / "tiled", "tiled"};
+  const ProcessResult tiled = ProcessCapture(tiled_job, options);
+  const int bands = tiled.report.options["tiles_front"]["bands"];
+  const int band_rows = tiled.report.options["tiles_front"]["band_rows"];
+  ASSERT_EQ(bands, 3);
+
+  // Photometric stereo is per pixel: identical normals, except pixels regularised toward their
+  // neighbours, whose 3x3 neighbourhood a band edge cuts (the row on each side of an edge).
+  constexpr int kEdgeReachRows = 1;
+  const Image n_whole = ReadMap(whole_job.out_dir, "normal"), n_tiled = ReadMap(tiled_job.out_dir, "normal");
+  ASSERT_EQ(n_whole.height(), n_tiled.height());
+  int differ = 0, differ_off_edges = 0;
+  for (int r = 0; r < n_whole.height(); ++r) {
+    bool near_edge = false;
+    for (int b = 1; b < bands; ++b) {
+      const int edge = b * band_rows;  // first row of band b
+      near_edge = near_edge || (r >= edge - kEdgeReachRows && r < edge + kEdgeReachRows);
+    }
+    for (int c = 0; c < n_whole.width(); ++c) {
+      bool same = true;
+      for (int ch = 0; ch < 3; ++ch) same = same && n_whole.at(ch, r, c) == n_tiled.at(ch, r, c);
+      differ += !same;
+      differ_off_edges += !same && !near_edge;
+    }
+  }
+  EXPECT_EQ(differ_off_edges, 0);
+  // At most a few percent of the edge rows' pixels are regularised.
+  constexpr double kMaxDifferingFraction = 0.01;
+  EXPECT_LE(differ, kMaxDifferingFraction * static_cast<double>(n_whole.pixel_count())) << differ << " pixels";
+
+  // Heights: the same integration of nearly the same normals. 1 um is 1/50 of the scene's relief
+  // and 50x the difference measured (2e-5 mm mean).
+  constexpr double kHeightToleranceMm = 1e-3;
+  const Image h_whole = ReadMap(whole_job.out_dir, "height"), h_tiled = ReadMap(tiled_job.out_dir, "height");
+  double height_sum = 0.0;
+  for (std::size_t i = 0; i < h_whole.pixel_count(); ++i) height_sum += std::abs(h_whole.data()[i] - h_tiled.data()[i]);
+  EXPECT_LE(height_sum / static_cast<double>(h_whole.pixel_count()), kHeightToleranceMm);
+
+  // Fit: on a grid this small the sample is the whole grid (kMinSamplePixels), so the clusters are
+  // the one-band run's and the per-pixel step, band by band, must give the same maps; only pixels
+  // whose normal changed (above) may differ. (The effect of a decimated sample on a large scan is
+  // measured in docs/process.md.)
+  ASSERT_EQ(tiled.report.options["tiles_front"]["fit_sample_step"], 1);
+  for (const char* map : {"base_color", "roughness", "residual"}) {
+    ASSERT_TRUE(fs::exists(whole_job.out_dir / "maps" / (std::string(map) + ".exr"))) << map;
+    const Image a = ReadMap(whole_job.out_dir, map), b = ReadMap(tiled_job.out_dir, map);
+    int map_differ = 0;
+    for (std::size_t i = 0; i < a.data().size(); ++i) map_differ += a.data()[i] != b.data()[i];
+    EXPECT_LE(map_differ, a.channels() * differ) << map;
+  }
+  EXPECT_EQ(whole.report.quality["front"]["fit_converged"], tiled.report.quality["front"]["fit_converged"]);
+}
+
+}  // namespace
+}  // namespace u3mscan
