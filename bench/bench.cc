@@ -24,6 +24,7 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/scene.h"
+#include "datasets_synthetic/synth_run.h"
 #include "datasets_synthetic/truth_writer.h"
 
 extern char** environ;
@@ -37,8 +38,6 @@ namespace {
 // Fixed id and time, so every run writes the same material (process.h).
 constexpr const char* kRunId = "00000000-0000-4000-8000-000000000000";
 constexpr const char* kRunCreated = "2026-01-01T00:00:00Z";
-// The sample covers this fraction of the view (as `u3mscan synth`, synth_run.h).
-constexpr double kSampleFill = 0.75;
 constexpr double kDpi = 300.0;
 
 std::string Fixed(double v, int digits) {
@@ -78,15 +77,21 @@ fs::path EnsureCapture(const BenchCase& c, const BenchOptions& options, int* lig
   if (fs::exists(dir / synthetic::kCaptureSubdir / "capture.json")) return dir;
   fs::remove_all(dir);
   synthetic::SceneOptions scene_options;
-  scene_options.width = scene_options.height = std::max(8, static_cast<int>(std::lround(kSampleFill * c.size_px)));
+  scene_options.width = scene_options.height = std::max(8, static_cast<int>(std::lround(synthetic::kSampleFillOfView * c.size_px)));
   scene_options.pitch_mm = rig_options.pitch_mm;
   scene_options.seed = options.seed;
-  const synthetic::SceneTruth scene = synthetic::MakeScene(c.scene, scene_options);
+  // Rendered as `u3mscan synth` does (synth_run.h): a finer sampling of the fabric seen through an
+  // area-integrating camera, the truth being its area average on the output grid, so the error the
+  // bench reports is the pipeline's and not the point-sampled renderer's aliasing.
+  const int supersample = synthetic::AutoSupersample(c.size_px, c.size_px);
+  const synthetic::OversampledScene scene = synthetic::MakeOversampledScene(c.scene, scene_options, supersample);
   synthetic::CaptureOptions capture;
   capture.format = synthetic::FrameFormat::kTiff;  // the decoded values; DNG decoding is not what we time
   capture.calibration_frames = c.calibration_frames;
+  capture.supersample = supersample;
   fs::create_directories(dir.parent_path());
-  synthetic::WriteSyntheticCapture(scene, rig, capture, dir);  // default truth writer: maps + truth.json with the rig
+  // Default truth writer: maps + truth.json with the rig.
+  synthetic::WriteSyntheticCapture(scene.fine, scene.truth, rig, capture, dir);
   return dir;
 }
 
