@@ -26,7 +26,7 @@
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/scene.h"
 #include "pipeline/process.h"
-#include "tests/pipeline/e2e_scene.h"
+#include "tests/support/bump_scene.h"
 #include "u3m/image_io.h"
 #include "u3m/validate.h"
 
