@@ -13,17 +13,6 @@
 namespace u3mscan {
 namespace {
 
-// Rows [row0, row0 + rows) of every channel of a grid-sized image.
-Image CropRows(const Image& image, int row0, int rows) {
-  Image out(image.width(), rows, image.channels(), 0.0f, image.pitch_mm());
-  const std::size_t w = static_cast<std::size_t>(image.width());
-  for (int c = 0; c < image.channels(); ++c) {
-    const float* src = image.plane(c).data() + static_cast<std::size_t>(row0) * w;
-    std::copy(src, src + static_cast<std::size_t>(rows) * w, out.data().data() + static_cast<std::size_t>(c) * rows * w);
-  }
-  return out;
-}
-
 // DarkAmbient::Apply on rows [y0, y0 + frame rows) of a camera frame (same arithmetic, so the
 // result equals the same rows of the corrected whole frame).
 void ApplyDarkAmbientRows(const DarkAmbient& dark_ambient, const FrameSpec& spec, int camera_height, int y0,

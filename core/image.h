@@ -53,4 +53,11 @@ class Image {
   std::vector<float> data_;
 };
 
+// Rows [row0, row0 + rows) of every channel of an image (a band of a tiled run). Throws
+// std::out_of_range when the rows lie outside the image.
+Image CropRows(const Image& image, int row0, int rows);
+// Writes `band` (same width and channels) into rows [row0, row0 + band height) of `full`. Throws
+// std::out_of_range when it does not fit.
+void PasteRows(const Image& band, int row0, Image* full);
+
 }  // namespace u3mscan

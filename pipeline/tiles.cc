@@ -27,30 +27,6 @@ TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double 
   return plan;
 }
 
-Image CropRows(const Image& image, int row0, int rows) {
-  if (row0 < 0 || rows < 0 || row0 + rows > image.height()) throw std::out_of_range("CropRows: rows outside the image");
-  Image out(image.width(), rows, image.channels(), 0.0f, image.pitch_mm());
-  const std::size_t w = static_cast<std::size_t>(image.width());
-  for (int c = 0; c < image.channels(); ++c) {
-    const float* src = image.plane(c).data() + static_cast<std::size_t>(row0) * w;
-    std::copy(src, src + static_cast<std::size_t>(rows) * w, out.data().data() + static_cast<std::size_t>(c) * rows * w);
-  }
-  return out;
-}
-
-void PasteRows(const Image& band, int row0, Image* full) {
-  if (band.width() != full->width() || band.channels() != full->channels() || row0 < 0 ||
-      row0 + band.height() > full->height()) {
-    throw std::out_of_range("PasteRows: band does not fit the image");
-  }
-  const std::size_t w = static_cast<std::size_t>(band.width());
-  for (int c = 0; c < band.channels(); ++c) {
-    const float* src = band.plane(c).data();
-    std::copy(src, src + static_cast<std::size_t>(band.height()) * w,
-              full->data().data() + (static_cast<std::size_t>(c) * full->height() + row0) * w);
-  }
-}
-
 MetricGrid SampleGrid(const MetricGrid& grid, int step) {
   const int o = step / 2;
   MetricGrid sample;

@@ -40,11 +40,6 @@ struct TilePlan {
 // the sample has kMinSamplePixels (1 on small grids: the sample is the whole grid).
 TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes);
 
-// Rows [row0, row0 + rows) of every channel of an image.
-Image CropRows(const Image& image, int row0, int rows);
-// Writes `band` (same width and channels) into rows [row0, ...) of `full`.
-void PasteRows(const Image& band, int row0, Image* full);
-
 // The sample grid of step k: pixel (i, j) is grid pixel (k j + k/2, k i + k/2), so its centre lies
 // where that pixel's does (pitch k p).
 MetricGrid SampleGrid(const MetricGrid& grid, int step);
