@@ -726,6 +726,16 @@ double EstimateDiffuseRoughness(Solver& solver, const Stack& stack, const Photom
   return std::clamp(r, 0.0, 1.0);
 }
 
+// kBurley: sets the solver's diffuse roughness, the given one or the least-residual estimate at the
+// anchor plane (one rule for RunPhotometricStereo, SolvePhotometricStereoAt and
+// ChooseDiffuseRoughness). Leaves the solver on Lambert's law for kLambert.
+void SetDiffuseRoughness(Solver& solver, const Stack& stack, const PhotometricStereoOptions& options) {
+  if (options.diffuse_model != DiffuseModel::kBurley) return;
+  solver.set_roughness(options.diffuse_roughness >= 0.0
+                           ? options.diffuse_roughness
+                           : EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm));
+}
+
 }  // namespace
 
 PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const PhotometricStereoOptions& options,
@@ -736,9 +746,7 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   const int w = stack.grid.width, h = stack.grid.height;
   ReportProgress(progress, "photometric stereo", 0.0);
   if (options.diffuse_model == DiffuseModel::kBurley) {
-    solver.set_roughness(options.diffuse_roughness >= 0.0
-                             ? options.diffuse_roughness
-                             : EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm));
+    SetDiffuseRoughness(solver, stack, options);
     if (solver.burley()) {
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << solver.roughness()
                 << (options.diffuse_roughness >= 0.0 ? " (given)" : " (least residual)");
@@ -791,11 +799,7 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
     throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
   }
   Solver solver(stack, options);
-  if (options.diffuse_model == DiffuseModel::kBurley) {
-    solver.set_roughness(options.diffuse_roughness >= 0.0
-                             ? options.diffuse_roughness
-                             : EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm));
-  }
+  SetDiffuseRoughness(solver, stack, options);
   PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm);
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
   return result;
@@ -803,11 +807,10 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
 
 double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions& options) {
   if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
-  if (options.diffuse_model != DiffuseModel::kBurley) return -1.0;
-  if (options.diffuse_roughness >= 0.0) return options.diffuse_roughness;
   CheckStack(stack, options);
   Solver solver(stack, options);
-  return EstimateDiffuseRoughness(solver, stack, options, options.integration.mean_height_mm);
+  SetDiffuseRoughness(solver, stack, options);
+  return solver.burley() ? solver.roughness() : -1.0;
 }
 
 }  // namespace u3mscan::reconstruction
