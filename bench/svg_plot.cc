@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/markup_escape.h"
 
 namespace u3mscan::bench {
 
@@ -64,22 +65,6 @@ void Marker(std::ostringstream& s, int index, double x, double y, const char* co
 
 }  // namespace
 
-std::string XmlEscape(const std::string& text) {
-  std::string out;
-  out.reserve(text.size());
-  for (char c : text) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&apos;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
-
 std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& series) {
   auto tx = [&](double v) { return spec.log_x ? std::log10(v) : v; };
   auto ty = [&](double v) { return spec.log_y ? std::log10(v) : v; };
@@ -122,7 +107,7 @@ std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& 
   s << "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"" << spec.width_px << "\" height=\"" << spec.height_px
     << "\" viewBox=\"0 0 " << spec.width_px << " " << spec.height_px << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
   s << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-  s << "<text x=\"" << spec.width_px / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">" << XmlEscape(spec.title) << "</text>\n";
+  s << "<text x=\"" << spec.width_px / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">" << EscapeMarkup(spec.title) << "</text>\n";
   s << "<rect x=\"" << kMarginLeft << "\" y=\"" << kMarginTop << "\" width=\"" << Num(plot_w) << "\" height=\"" << Num(plot_h)
     << "\" fill=\"none\" stroke=\"#444\"/>\n";
   for (double t : Ticks(x_lo, x_hi, spec.log_x)) {
@@ -130,19 +115,19 @@ std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& 
     const double x = kMarginLeft + (t - x_lo) / (x_hi - x_lo) * plot_w;
     s << "<line x1=\"" << Num(x) << "\" y1=\"" << kMarginTop << "\" x2=\"" << Num(x) << "\" y2=\"" << Num(kMarginTop + plot_h)
       << "\" stroke=\"#ddd\"/><text x=\"" << Num(x) << "\" y=\"" << Num(kMarginTop + plot_h + 16) << "\" text-anchor=\"middle\">"
-      << XmlEscape(TickText(t, spec.log_x)) << "</text>\n";
+      << EscapeMarkup(TickText(t, spec.log_x)) << "</text>\n";
   }
   for (double t : Ticks(y_lo, y_hi, spec.log_y)) {
     if (t < y_lo || t > y_hi) continue;
     const double y = kMarginTop + plot_h - (t - y_lo) / (y_hi - y_lo) * plot_h;
     s << "<line x1=\"" << kMarginLeft << "\" y1=\"" << Num(y) << "\" x2=\"" << Num(kMarginLeft + plot_w) << "\" y2=\"" << Num(y)
       << "\" stroke=\"#ddd\"/><text x=\"" << Num(kMarginLeft - 6) << "\" y=\"" << Num(y + 4) << "\" text-anchor=\"end\">"
-      << XmlEscape(TickText(t, spec.log_y)) << "</text>\n";
+      << EscapeMarkup(TickText(t, spec.log_y)) << "</text>\n";
   }
   s << "<text x=\"" << Num(kMarginLeft + plot_w / 2) << "\" y=\"" << spec.height_px - 12 << "\" text-anchor=\"middle\">"
-    << XmlEscape(spec.x_label) << (spec.log_x ? " (log)" : "") << "</text>\n";
+    << EscapeMarkup(spec.x_label) << (spec.log_x ? " (log)" : "") << "</text>\n";
   s << "<text transform=\"translate(18," << Num(kMarginTop + plot_h / 2) << ") rotate(-90)\" text-anchor=\"middle\">"
-    << XmlEscape(spec.y_label) << (spec.log_y ? " (log)" : "") << "</text>\n";
+    << EscapeMarkup(spec.y_label) << (spec.log_y ? " (log)" : "") << "</text>\n";
 
   for (std::size_t k = 0; k < series.size(); ++k) {
     const char* colour = kColours[k % kColourCount];
@@ -158,7 +143,7 @@ std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& 
       s << "\"/>\n";
     }
     for (const auto& p : points) {
-      s << "<g><title>" << XmlEscape(series[k].name + ": " + p.label + " (" + Num(p.x) + ", " + Num(p.y) + ")") << "</title>";
+      s << "<g><title>" << EscapeMarkup(series[k].name + ": " + p.label + " (" + Num(p.x) + ", " + Num(p.y) + ")") << "</title>";
       Marker(s, static_cast<int>(k), px(p.x), py(p.y), colour);
       s << "</g>\n";
     }
@@ -166,7 +151,7 @@ std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& 
     const double ly = kMarginTop + 10 + 20.0 * static_cast<double>(k);
     const double lx = kMarginLeft + plot_w + 16;
     Marker(s, static_cast<int>(k), lx, ly, colour);
-    s << "<text x=\"" << Num(lx + 10) << "\" y=\"" << Num(ly + 4) << "\">" << XmlEscape(series[k].name) << "</text>\n";
+    s << "<text x=\"" << Num(lx + 10) << "\" y=\"" << Num(ly + 4) << "\">" << EscapeMarkup(series[k].name) << "</text>\n";
   }
   s << "</svg>\n";
   return s.str();

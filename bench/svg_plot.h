@@ -31,7 +31,4 @@ std::string ScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& 
 // Writes it atomically (temporary file, then rename); throws InputError naming the file on failure.
 void WriteScatterPlotSvg(const PlotSpec& spec, const std::vector<PlotSeries>& series, const std::filesystem::path& path);
 
-// Escapes &, <, >, " and ' for XML text and attributes.
-std::string XmlEscape(const std::string& text);
-
 }  // namespace u3mscan::bench

@@ -13,27 +13,13 @@
 
 #include "core/colour.h"
 #include "core/error.h"
+#include "core/markup_escape.h"
 #include "pipeline/run_report.h"
 
 namespace u3mscan {
 namespace {
 
 constexpr int kThumbnailSide = 256;  // longest side of a thumbnail, pixels
-
-std::string EscapeHtml(const std::string& text) {
-  std::string out;
-  out.reserve(text.size());
-  for (char c : text) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
 
 std::string Base64(const std::vector<unsigned char>& bytes) {
   static constexpr char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -122,7 +108,7 @@ std::string FormatSeconds(double seconds) {
 void JsonTable(std::ostringstream& html, const nlohmann::json& object) {
   html << "<table><tr><th>figure</th><th>value</th></tr>\n";
   for (const auto& [key, value] : object.items()) {
-    html << "<tr><td>" << EscapeHtml(key) << "</td><td><code>" << EscapeHtml(value.dump()) << "</code></td></tr>\n";
+    html << "<tr><td>" << EscapeMarkup(key) << "</td><td><code>" << EscapeMarkup(value.dump()) << "</code></td></tr>\n";
   }
   html << "</table>\n";
 }
@@ -132,35 +118,35 @@ void JsonTable(std::ostringstream& html, const nlohmann::json& object) {
 void WriteReportHtml(const RunReport& report, const std::filesystem::path& path) {
   std::ostringstream html;
   html << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>u3mscan report: "
-       << EscapeHtml(report.capture_name) << "</title>\n<style>\n"
+       << EscapeMarkup(report.capture_name) << "</title>\n<style>\n"
        << "body{font-family:sans-serif;margin:2em;max-width:1200px;color:#222}"
        << "table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #bbb;padding:3px 8px;text-align:left}"
        << "th{background:#eee}.skipped{color:#777}.failed{color:#b00}figure{display:inline-block;margin:6px;text-align:center}"
        << "figure img{border:1px solid #999;image-rendering:pixelated;max-width:256px}figcaption{font-size:85%}\n"
        << "</style></head><body>\n";
-  html << "<h1>" << EscapeHtml(report.capture_name) << "</h1>\n<p>Capture <code>" << EscapeHtml(report.capture_path)
-       << "</code> &rarr; <code>" << EscapeHtml(report.output_path) << "</code><br>Status: <b"
-       << (report.status == "ok" ? "" : " class=\"failed\"") << ">" << EscapeHtml(report.status) << "</b>";
-  if (!report.error.empty()) html << " &mdash; " << EscapeHtml(report.error);
-  html << "<br>Started " << EscapeHtml(report.started_utc) << ", preset <b>" << EscapeHtml(report.preset)
+  html << "<h1>" << EscapeMarkup(report.capture_name) << "</h1>\n<p>Capture <code>" << EscapeMarkup(report.capture_path)
+       << "</code> &rarr; <code>" << EscapeMarkup(report.output_path) << "</code><br>Status: <b"
+       << (report.status == "ok" ? "" : " class=\"failed\"") << ">" << EscapeMarkup(report.status) << "</b>";
+  if (!report.error.empty()) html << " &mdash; " << EscapeMarkup(report.error);
+  html << "<br>Started " << EscapeMarkup(report.started_utc) << ", preset <b>" << EscapeMarkup(report.preset)
        << "</b>, total " << FormatSeconds(report.total_seconds) << ", peak memory " << std::fixed
        << std::setprecision(0) << report.peak_memory_mib << " MiB</p>\n";
 
   html << "<h2>Steps</h2>\n<table><tr><th>step</th><th>ran</th><th>time</th><th>why</th></tr>\n";
   for (const auto& step : report.steps) {
-    html << "<tr" << (step.ran ? "" : " class=\"skipped\"") << "><td>" << EscapeHtml(step.name) << "</td><td>"
+    html << "<tr" << (step.ran ? "" : " class=\"skipped\"") << "><td>" << EscapeMarkup(step.name) << "</td><td>"
          << (step.ran ? "yes" : "skipped") << "</td><td>" << (step.ran ? FormatSeconds(step.seconds) : "")
-         << "</td><td>" << EscapeHtml(step.reason) << "</td></tr>\n";
+         << "</td><td>" << EscapeMarkup(step.reason) << "</td></tr>\n";
   }
   html << "</table>\n";
 
   html << "<h2>Parameters</h2>\n<table><tr><th>parameter</th><th>value</th><th>source</th><th>why</th></tr>\n";
   for (const auto& p : report.parameters) {
     html << "<tr" << (p.source == ParameterSource::kDefault ? " class=\"skipped\"" : "") << "><td>"
-         << EscapeHtml(p.name) << "</td><td>" << std::setprecision(4) << std::defaultfloat << p.value;
+         << EscapeMarkup(p.name) << "</td><td>" << std::setprecision(4) << std::defaultfloat << p.value;
     if (p.uncertainty > 0) html << " &plusmn; " << p.uncertainty;
     html << "</td><td>" << ParameterSourceName(p.source) << (p.reliable() ? "" : ", UNRELIABLE") << "</td><td>"
-         << EscapeHtml(p.reason) << (p.reliable() ? "" : "; unreliable: " + EscapeHtml(p.unreliable_reason))
+         << EscapeMarkup(p.reason) << (p.reliable() ? "" : "; unreliable: " + EscapeMarkup(p.unreliable_reason))
          << "</td></tr>\n";
   }
   html << "</table>\n";
@@ -175,7 +161,7 @@ void WriteReportHtml(const RunReport& report, const std::filesystem::path& path)
   }
   if (!report.warnings.empty()) {
     html << "<h2>Warnings</h2>\n<ul>\n";
-    for (const auto& w : report.warnings) html << "<li>" << EscapeHtml(w) << "</li>\n";
+    for (const auto& w : report.warnings) html << "<li>" << EscapeMarkup(w) << "</li>\n";
     html << "</ul>\n";
   }
 
@@ -189,8 +175,8 @@ void WriteReportHtml(const RunReport& report, const std::filesystem::path& path)
         header = true;
       }
       const auto png = ThumbnailPng(item);
-      html << "<figure><img alt=\"" << EscapeHtml(item.label) << "\" src=\"data:image/png;base64," << Base64(png)
-           << "\"><figcaption>" << EscapeHtml(item.label) << "</figcaption></figure>\n";
+      html << "<figure><img alt=\"" << EscapeMarkup(item.label) << "\" src=\"data:image/png;base64," << Base64(png)
+           << "\"><figcaption>" << EscapeMarkup(item.label) << "</figcaption></figure>\n";
     }
     if (header) html << "</div>\n";
   }
