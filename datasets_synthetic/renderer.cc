@@ -285,15 +285,14 @@ bool SceneRenderer::InShadow(const Eigen::Vector3d& p, const Eigen::Vector3d& l)
   return false;
 }
 
-Image SceneRenderer::RenderLight(int light_index) const {
-  if (camera_index_ < 0) throw std::logic_error("SceneRenderer::RenderLight before SetCamera");
+// The pixel loop every front-lit image shares: each camera pixel averages shade_ray(hit, grid) over
+// its rays (rays that miss everything add nothing), times exposure_scale * vignetting * ray_scale
+// (in that order: the frames stay bit for bit what they were before this loop was shared).
+template <typename ShadeRay>
+Image SceneRenderer::AverageOverRays(float exposure_scale, float ray_scale, ShadeRay shade_ray) const {
   const RigCamera& cam = rig_.cameras[camera_index_];
-  const RigLight& light = rig_.lights.at(light_index);
   Image out(cam.width, cam.height, 3);
   const SceneGrid grid(scene_);
-  const float table_brdf = static_cast<float>(rig_.table_reflectance / kPi);
-  const float exposure = static_cast<float>(rig_.exposure_s);
-  const float inv_rays = 1.0f / static_cast<float>(rays_per_pixel_);
   float* planes[3] = {out.plane(0).data(), out.plane(1).data(), out.plane(2).data()};
   ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
     for (std::size_t row = begin; row < end; ++row) {
@@ -303,30 +302,9 @@ Image SceneRenderer::RenderLight(int light_index) const {
         for (int k = 0; k < rays_per_pixel_; ++k) {
           const float* h = &hits_[(i * rays_per_pixel_ + k) * 3];
           if (!std::isfinite(h[0])) continue;
-          const Eigen::Vector3d p(h[0], h[1], h[2]);
-          Eigen::Vector3d l_world;
-          const Eigen::Vector3d e = LightIrradiance(light, p, &l_world);
-          if (options_.shadows && InShadow(p, l_world)) continue;
-          const Vec3<float> l = ToVec3f(l_world);
-          const Vec3<float> v = ToVec3f((cam.position_mm - p).normalized());
-          Vec3<float> rgb = Vec3<float>::Zero();
-          Footprint f;
-          float alpha = 0.0f;
-          if (grid.Locate(p.x(), p.y(), &f)) {
-            const SurfacePoint sp = SampleSurface(scene_, f);
-            alpha = sp.alpha;
-            if (alpha > 0) {
-              Vec3<float> t, b;
-              LocalFrame(sp.normal, sp.tangent, &t, &b);
-              const Vec3<float> l_local(l.dot(t), l.dot(b), l.dot(sp.normal));
-              const Vec3<float> v_local(v.dot(t), v.dot(b), v.dot(sp.normal));
-              rgb = alpha * std::max(0.0f, l_local.z()) * EvaluateModel(scene_.model, sp.params, l_local, v_local);
-            }
-          }
-          if (alpha < 1) rgb += Vec3<float>::Constant((1 - alpha) * table_brdf * std::max(0.0f, l.z()));
-          sum += rgb.cwiseProduct(ToVec3f(e));
+          sum += shade_ray(Eigen::Vector3d(h[0], h[1], h[2]), grid);
         }
-        const float scale = exposure * vignetting_[i] * inv_rays;
+        const float scale = exposure_scale * vignetting_[i] * ray_scale;
         for (int c = 0; c < 3; ++c) planes[c][i] = scale * sum[c];
       }
     }
@@ -334,34 +312,51 @@ Image SceneRenderer::RenderLight(int light_index) const {
   return out;
 }
 
-Image SceneRenderer::RenderAmbient() const {
-  if (camera_index_ < 0) throw std::logic_error("SceneRenderer::RenderAmbient before SetCamera");
+Image SceneRenderer::RenderLight(int light_index) const {
+  if (camera_index_ < 0) throw std::logic_error("SceneRenderer::RenderLight before SetCamera");
   const RigCamera& cam = rig_.cameras[camera_index_];
-  Image out(cam.width, cam.height, 3);
-  const SceneGrid grid(scene_);
-  // A uniform sky of irradiance E on a diffuse albedo a gives radiance a E / pi.
-  const float scale = static_cast<float>(rig_.exposure_s * rig_.ambient_irradiance / kPi) / static_cast<float>(rays_per_pixel_);
-  ParallelFor(cam.height, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t row = begin; row < end; ++row) {
-      for (int col = 0; col < cam.width; ++col) {
-        const std::size_t i = row * cam.width + col;
-        Vec3<float> sum = Vec3<float>::Zero();
-        for (int k = 0; k < rays_per_pixel_; ++k) {
-          const float* h = &hits_[(i * rays_per_pixel_ + k) * 3];
-          if (!std::isfinite(h[0])) continue;
-          Vec3<float> albedo = Vec3<float>::Constant(static_cast<float>(rig_.table_reflectance));
-          Footprint f;
-          if (grid.Locate(h[0], h[1], &f)) {
-            const SurfacePoint sp = SampleSurface(scene_, f);
-            albedo = sp.alpha * sp.params.base_color * (1 - sp.params.metallic) + (1 - sp.alpha) * albedo;
-          }
-          sum += albedo;
-        }
-        for (int c = 0; c < 3; ++c) out.plane(c)[i] = scale * vignetting_[i] * sum[c];
+  const RigLight& light = rig_.lights.at(light_index);
+  const float table_brdf = static_cast<float>(rig_.table_reflectance / kPi);
+  const float exposure = static_cast<float>(rig_.exposure_s);
+  const float inv_rays = 1.0f / static_cast<float>(rays_per_pixel_);
+  return AverageOverRays(exposure, inv_rays, [&](const Eigen::Vector3d& p, const SceneGrid& grid) -> Vec3<float> {
+    Eigen::Vector3d l_world;
+    const Eigen::Vector3d e = LightIrradiance(light, p, &l_world);
+    if (options_.shadows && InShadow(p, l_world)) return Vec3<float>::Zero();
+    const Vec3<float> l = ToVec3f(l_world);
+    const Vec3<float> v = ToVec3f((cam.position_mm - p).normalized());
+    Vec3<float> rgb = Vec3<float>::Zero();
+    Footprint f;
+    float alpha = 0.0f;
+    if (grid.Locate(p.x(), p.y(), &f)) {
+      const SurfacePoint sp = SampleSurface(scene_, f);
+      alpha = sp.alpha;
+      if (alpha > 0) {
+        Vec3<float> t, b;
+        LocalFrame(sp.normal, sp.tangent, &t, &b);
+        const Vec3<float> l_local(l.dot(t), l.dot(b), l.dot(sp.normal));
+        const Vec3<float> v_local(v.dot(t), v.dot(b), v.dot(sp.normal));
+        rgb = alpha * std::max(0.0f, l_local.z()) * EvaluateModel(scene_.model, sp.params, l_local, v_local);
       }
     }
+    if (alpha < 1) rgb += Vec3<float>::Constant((1 - alpha) * table_brdf * std::max(0.0f, l.z()));
+    return rgb.cwiseProduct(ToVec3f(e));
   });
-  return out;
+}
+
+Image SceneRenderer::RenderAmbient() const {
+  if (camera_index_ < 0) throw std::logic_error("SceneRenderer::RenderAmbient before SetCamera");
+  // A uniform sky of irradiance E on a diffuse albedo a gives radiance a E / pi.
+  const float scale = static_cast<float>(rig_.exposure_s * rig_.ambient_irradiance / kPi) / static_cast<float>(rays_per_pixel_);
+  return AverageOverRays(scale, 1.0f, [&](const Eigen::Vector3d& p, const SceneGrid& grid) -> Vec3<float> {
+    Vec3<float> albedo = Vec3<float>::Constant(static_cast<float>(rig_.table_reflectance));
+    Footprint f;
+    if (grid.Locate(p.x(), p.y(), &f)) {
+      const SurfacePoint sp = SampleSurface(scene_, f);
+      albedo = sp.alpha * sp.params.base_color * (1 - sp.params.metallic) + (1 - sp.alpha) * albedo;
+    }
+    return albedo;
+  });
 }
 
 const Image& SceneRenderer::AmbientImage() {

@@ -69,6 +69,9 @@ class SceneRenderer {
   double HeightAt(double x_mm, double y_mm) const;
 
  private:
+  // The pixel loop of RenderLight and RenderAmbient; ShadeRay(hit point mm, scene grid) -> RGB.
+  template <typename ShadeRay>
+  Image AverageOverRays(float exposure_scale, float ray_scale, ShadeRay shade_ray) const;
   Eigen::Vector3d Trace(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction) const;
 
   const SceneTruth& scene_;
