@@ -11,6 +11,7 @@
 #include "capture/colour_calibration.h"
 #include "core/error.h"
 #include "core/units.h"
+#include "in_memory_capture.h"
 #include "synthetic_views.h"
 #include "u3m/image_io.h"
 
@@ -30,10 +31,8 @@ Eigen::Vector3d Direction(double elevation_deg, double azimuth_deg) {
 
 // An in-memory capture: one camera straight above (pose to be found from the board), two
 // directional lights, and one frame of every role.
-struct TinyCapture {
+struct TinyCapture : testing::InMemoryCapture {
   CameraModel truth = testing::DownCamera(320, 240, 300.0, 80.0);
-  Manifest manifest;
-  std::map<std::size_t, Image> frames;
   Eigen::Vector3d light_directions[2] = {Direction(45.0, 30.0), Direction(60.0, 200.0)};
 
   TinyCapture() {
@@ -108,18 +107,10 @@ struct TinyCapture {
       return 0.5 * rho * cos_theta / kPi;
     }, 2);
   }
+  // Every frame carries the sensor's dark level, sample frames also the room light.
   void Add(FrameSpec spec, Image image, double ambient = 0.0) {
     for (float& v : image.data()) v += static_cast<float>(kDark + ambient);
-    frames[manifest.frames.size()] = std::move(image);
-    manifest.frames.push_back(std::move(spec));
-  }
-  FrameLoader Loader() const {
-    return [this](std::size_t index) {
-      DecodedFrame frame;
-      frame.rgb = frames.at(index);
-      frame.saturated.assign(frame.rgb.pixel_count(), 0);
-      return frame;
-    };
+    InMemoryCapture::Add(std::move(spec), std::move(image));
   }
 };
 

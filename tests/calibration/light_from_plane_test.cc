@@ -14,6 +14,7 @@
 #include "capture/camera_model.h"
 #include "datasets_synthetic/calibration_frames.h"
 #include "datasets_synthetic/rig.h"
+#include "in_memory_capture.h"
 
 namespace u3mscan {
 namespace {
@@ -24,10 +25,8 @@ constexpr double kManifestErrorMm = 15.0;           // a design value 15 mm off 
 // (0.5 of full scale, 20000 e at full scale: sqrt(10000) / 10000 = 1 %).
 constexpr double kFrameNoiseRelative = 0.01;
 
-struct OneSphereCapture {
+struct OneSphereCapture : testing::InMemoryCapture {
   synthetic::Rig rig;
-  Manifest manifest;
-  std::map<std::size_t, Image> frames;
 
   // Lights `keep` of the near rig (both rings), one sphere placement near the view's centre.
   explicit OneSphereCapture(const std::vector<int>& keep, bool with_flats = true) {
@@ -72,18 +71,6 @@ struct OneSphereCapture {
             noisy(synthetic::RenderFlatFrame(rig, 0, targets, li)));
       }
     }
-  }
-  void Add(FrameSpec spec, Image image) {
-    frames[manifest.frames.size()] = std::move(image);
-    manifest.frames.push_back(std::move(spec));
-  }
-  FrameLoader Loader() const {
-    return [this](std::size_t index) {
-      DecodedFrame frame;
-      frame.rgb = frames.at(index);
-      frame.saturated.assign(frame.rgb.pixel_count(), 0);
-      return frame;
-    };
   }
 };
 
