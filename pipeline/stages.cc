@@ -209,7 +209,7 @@ SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, co
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
 
-  IntegrateSide(stack.grid, near, options, alpha, &out, report, progress);
+  IntegrateSide(stack->grid, near, options, alpha, &out, report, progress);
   return out;
 }
 
