@@ -94,7 +94,6 @@ CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& heigh
     if (std::isfinite(z)) max_height = std::max(max_height, z);
   }
   const double p = height_grid.pitch_mm;
-  const double bias_mm = options.bias_px * p;
   const double u_max = height_grid.width - 1, v_max = height_grid.height - 1;
   std::atomic<long long> marked{0};
 
@@ -121,9 +120,10 @@ CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& heigh
           bool shadow = false;
           if (!(d.z() > 0.0)) {
             shadow = true;  // below the sample plane: lights nothing
-          } else if (z0 + bias_mm < max_height) {
+          } else {
             const double speed = std::hypot(d.x(), d.y());  // horizontal length per unit ray length
-            if (speed > 1e-12) {
+            const double bias_mm = speed > 1e-12 ? options.bias_px * p * d.z() / speed : 0.0;
+            if (speed > 1e-12 && z0 + bias_mm < max_height) {
               const double du = options.step_px * d.x() / speed, dv = -options.step_px * d.y() / speed;
               const double dz = options.step_px * p * d.z() / speed;
               // A point light ends the ray: no march past its horizontal distance.
@@ -195,7 +195,7 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
     const double start = Seconds();
     const Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
     out.counts = MarkCastShadows(height, stack, shadow_options);
-    out.mark_seconds = Seconds() - start;
+    out.mark_seconds += Seconds() - start;
     // Distant lights do not depend on the height; near lights without refinement stay on the plane.
     const Image kept_height = std::move(result.height_mm);
     result = SolvePhotometricStereoAt(*stack, again, kept_height.empty() ? height : kept_height);

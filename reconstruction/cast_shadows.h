@@ -7,8 +7,8 @@
 // point (the pixel centre at its integrated height) toward the light (a directional light: its
 // fixed direction; a point light: the straight line to its position) and marches over the height
 // field in steps of step_px grid pixels along the sample plane, the height looked up bilinearly.
-// The observation is marked when the ray passes more than bias_px pixel pitches below the height
-// field; the march stops when the ray rises above the map's highest point, leaves the map, or
+// The observation is marked when the ray passes below the height field by more than a bias (the
+// height the ray climbs over bias_px pixels); the march stops when the ray rises above the map's highest point, leaves the map, or
 // (point light) reaches the light. A light below the sample plane (direction z <= 0) shadows
 // every pixel, as it lights nothing.
 //
@@ -26,9 +26,12 @@ struct CastShadowOptions {
   // March step along the sample plane, in pixels of the height map's grid. 0.5 samples every
   // bilinear cell at least twice: a ridge one pixel wide cannot be stepped over.
   double step_px = 0.5;
-  // The ray must pass this far below the height field to count as blocked, in pixel pitches of
-  // height (bias_px * pitch_mm, mm). Absorbs the bilinear surface's curvature and the integration
-  // noise of the start facet, which would otherwise shadow a facet by itself.
+  // The ray must pass below the height field by the height it climbs over bias_px pixels along the
+  // sample plane (bias_px * pitch_mm * tan(elevation of the ray), mm) to count as blocked: every
+  // shadow is shortened by bias_px pixels, whatever the light's elevation. Absorbs the bilinear
+  // surface's curvature at the start facet, which would otherwise shadow a facet by itself. (A
+  // fixed height instead, 0.1 pitch, shortened a 5 deg light's shadows by 1.1 px and missed 10 % of
+  // the grazing rig's shadowed observations on the true heights; test CastShadowChain.)
   double bias_px = 0.1;
 
   bool Check() const;
