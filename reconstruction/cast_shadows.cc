@@ -176,7 +176,11 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
   IntegrationOptions integration = options.integration;
   integration.pitch_mm = stack->grid.pitch_mm;
 
-  // First solve without marks: the plain near-light model on the anchor plane, or the distant one.
+  // First solve without marks (a stack marked before, e.g. solved twice, starts clean): the plain
+  // near-light model on the anchor plane, or the distant one.
+  for (Observation& o : stack->observations) {
+    for (auto& f : o.flags) f = static_cast<std::uint8_t>(f & ~kCastShadow);
+  }
   PhotometricStereoOptions first = options;
   first.refine_height = false;
   PhotometricStereoResult result = RunPhotometricStereo(*stack, first, progress);
