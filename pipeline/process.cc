@@ -167,7 +167,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     stages.photometric_stereo.integration.method = stages.integration.method;
   }
   if (!options.fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(options.fit_mode);
-  report.options = {{"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
+  stages.mark_cast_shadows = !options.no_cast_shadows;
+  report.options = {{"cast_shadows", stages.mark_cast_shadows}, {"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
                     {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
