@@ -200,6 +200,8 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
     const Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
     out.counts = MarkCastShadows(height, stack, shadow_options);
     out.mark_seconds += Seconds() - start;
+    // Nothing marked (e.g. lights high enough for the relief): the first solve stands.
+    if (out.counts.marked == 0) return result;
     // Distant lights do not depend on the height; near lights without refinement stay on the plane.
     const Image kept_height = std::move(result.height_mm);
     result = SolvePhotometricStereoAt(*stack, again, kept_height.empty() ? height : kept_height);

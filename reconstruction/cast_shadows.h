@@ -64,7 +64,7 @@ struct ShadowMarkingSummary {
 
 // Photometric stereo that leaves cast shadows out (sets kCastShadow on `stack`):
 //   distant lights (or refine_height off): solve, integrate the normals (options.integration,
-//     confidence as weights), mark, solve again;
+//     confidence as weights), mark, solve again (not when nothing was marked);
 //   near point lights: RunPhotometricStereo's height refinement, with the marks renewed after each
 //     integration (each round solves with the shadows of the height it solves at).
 // The diffuse roughness is chosen on the first solve and kept. `summary` (optional) receives the
