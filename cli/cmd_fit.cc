@@ -41,8 +41,8 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
-    const Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
-    const SideReconstruction geometry = ReconstructSide(stack, stages, Image(), &report, bar.Callback());
+    Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    const SideReconstruction geometry = ReconstructSide(&stack, stages, Image(), &report, bar.Callback());
     const fitting::FitResult fit = FitSide(stack, geometry, stages, &report, bar.Callback());
     bar.Finish();
     std::vector<std::pair<std::string, Image>> maps{{"base_color.exr", fit.base_color}};

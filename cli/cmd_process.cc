@@ -52,6 +52,8 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_option("--fit-mode", args->options.fit_mode,
                  "Override the preset's fit: clusters (cluster values only) | per-pixel (refined per pixel)")
       ->check(CLI::IsMember({"clusters", "per-pixel"}));
+  sub.add_flag("--no-cast-shadows", args->options.no_cast_shadows,
+               "Do not mark cast shadows from the heights (on in every preset; for comparisons)");
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack: a larger scan is processed in bands of rows "
                  "(docs/process.md, Large scans)")

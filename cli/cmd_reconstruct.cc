@@ -16,6 +16,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
   struct Args {
     std::string capture, out, side = "front", solver = "robust", integrator = "dct";
     double dpi = 0.0;
+    bool no_cast_shadows = false;
   };
   auto args = std::make_shared<Args>();
   sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
@@ -28,6 +29,8 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
       ->check(CLI::IsMember({"dct", "robust"}));
   sub.add_option("--side", args->side, "front | back")->capture_default_str()->check(CLI::IsMember({"front", "back"}));
   sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
+  sub.add_flag("--no-cast-shadows", args->no_cast_shadows,
+               "Do not mark cast shadows from the heights (they stay dark or outlier data for the solver)");
   sub.footer(
       "Writes DIR/maps/normal.exr (float, unit, world frame: x right, y up, z toward the camera),\n"
       "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).");
@@ -37,11 +40,12 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     stages.integration.method = reconstruction::ParseIntegrator(args->integrator);
     stages.photometric_stereo.integration.method = stages.integration.method;
     if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
+    stages.mark_cast_shadows = !args->no_cast_shadows;
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
-    const Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
-    const SideReconstruction result = ReconstructSide(stack, stages, Image(), &report, bar.Callback());
+    Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    const SideReconstruction result = ReconstructSide(&stack, stages, Image(), &report, bar.Callback());
     bar.Finish();
     const auto& ps = result.photometric_stereo;
     WriteStageOutputs(args->out,
@@ -49,7 +53,8 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
                        {"confidence.exr", ps.confidence}},
                       {});
     std::cout << "reconstructed " << stack.grid.width << "x" << stack.grid.height << " at " << stack.grid.dpi()
-              << " dpi; ill-conditioned pixels: " << ps.ill_conditioned_pixels << "\n";
+              << " dpi; ill-conditioned pixels: " << ps.ill_conditioned_pixels
+              << "; cast shadows: " << 100.0 * result.cast_shadow_share << " % of the observations\n";
     PrintSteps(report);
     std::cout << "maps in " << (std::filesystem::path(args->out) / "maps").string() << "\n";
     return kExitOk;

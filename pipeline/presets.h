@@ -10,6 +10,7 @@
 
 #include "capture/calibrate.h"
 #include "fitting/principled_fit.h"
+#include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
 
@@ -26,6 +27,11 @@ struct StageOptions {
   CalibrationOptions calibration;
   reconstruction::PhotometricStereoOptions photometric_stereo;
   reconstruction::IntegrationOptions integration;  // distant lights (near lights integrate inside PS)
+  // Cast shadows marked from the reconstructed heights and left out of photometric stereo and the
+  // fit (reconstruction/cast_shadows.h). On in every preset: marking costs one march per pixel and
+  // light, plus (distant lights) one integration and one more solve.
+  bool mark_cast_shadows = true;
+  reconstruction::CastShadowOptions cast_shadows;
   fitting::FitOptions fit;
 };
 

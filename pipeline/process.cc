@@ -167,7 +167,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     stages.photometric_stereo.integration.method = stages.integration.method;
   }
   if (!options.fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(options.fit_mode);
-  report.options = {{"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
+  stages.mark_cast_shadows = !options.no_cast_shadows;
+  report.options = {{"cast_shadows", stages.mark_cast_shadows}, {"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
                     {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
@@ -242,7 +243,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     double residual_mean = 0.0;
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
-      reconstruction = ReconstructSide(stack, stages, alpha, &report, progress);
+      reconstruction = ReconstructSide(&stack, stages, alpha, &report, progress);
       fit = FitSide(stack, reconstruction, stages, &report, progress);
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
     } else {
@@ -300,6 +301,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                      {"ill_conditioned_pixels", ps.ill_conditioned_pixels},
                      {"dark_pixels", ps.dark_pixels},
                      {"regularised_pixels", ps.regularised_pixels},
+                     {"cast_shadow_share", reconstruction.cast_shadow_share},
                      {"fit_rms_relative_residual", weight > 0 ? rms / weight : 0.0},
                      {"mean_relative_render_residual", residual_mean},
                      {"fit_converged", fit.convergence.all_converged}};

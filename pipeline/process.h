@@ -31,6 +31,7 @@ struct ProcessOptions {
   std::string solver;                   // ls | robust
   std::string integrator;               // dct | robust
   std::string fit_mode;                 // clusters | per-pixel (fitting::FitMode)
+  bool no_cast_shadows = false;         // do not mark cast shadows (on in every preset; for comparisons)
   // Memory budget of one band's stack, GiB: a side whose whole stack (model in pipeline/tiles.h)
   // needs more is processed in bands of rows (docs/process.md, "Large scans: memory and time").
   double max_memory_gib = 4.0;          // = kDefaultStackBudgetGiB

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include "core/error.h"
 #include "core/logging.h"
@@ -174,25 +175,41 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
   return stack;
 }
 
-SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& options, const Image& alpha,
+StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds) {
+  if (!options.mark_cast_shadows) return {"cast shadows", false, "off: shadows are only dark or outlier data", 0.0};
+  char detail[160];
+  std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the %s", 100.0 * share,
+                near ? "refined heights, every round" : "integrated heights, then solved again");
+  return {"cast shadows", true, detail, seconds};
+}
+
+SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress) {
   SideReconstruction out;
-  const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
+  const bool near = std::any_of(stack->lights.begin(), stack->lights.end(),
                                 [](const LightModel& l) { return l.type == LightType::kPoint; });
   double start = StageClock();
-  out.photometric_stereo = reconstruction::RunPhotometricStereo(stack, options.photometric_stereo, progress);
+  reconstruction::ShadowMarkingSummary shadows;
+  if (options.mark_cast_shadows) {
+    out.photometric_stereo = reconstruction::RunPhotometricStereoMarkingShadows(stack, options.photometric_stereo,
+                                                                                options.cast_shadows, &shadows, progress);
+    out.cast_shadow_share = shadows.counts.share();
+  } else {
+    out.photometric_stereo = reconstruction::RunPhotometricStereo(*stack, options.photometric_stereo, progress);
+  }
   const auto& ps = out.photometric_stereo;
   report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(options.photometric_stereo.solver) + ")",
                            true,
                            near ? "near point lights, height refined " + std::to_string(ps.near_iterations) + " rounds"
                                 : "distant lights",
-                           StageClock() - start});
+                           StageClock() - start - shadows.mark_seconds});
+  report->steps.push_back(CastShadowStep(options, out.cast_shadow_share, near, shadows.mark_seconds));
   if (!near) {
     report->steps.push_back({"near-light refinement", false,
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
 
-  IntegrateSide(stack.grid, near, options, alpha, &out, report, progress);
+  IntegrateSide(stack->grid, near, options, alpha, &out, report, progress);
   return out;
 }
 

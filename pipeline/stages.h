@@ -5,7 +5,7 @@
 //
 //   PrepareCapture  open + check the manifest, calibrate (dark/ambient, cameras, lights, flats, colour)
 //   BuildSideStack  one side's sample frames on the metric grid (core/stack.h)
-//   ReconstructSide photometric stereo + integration -> normal, albedo, confidence, height (mm)
+//   ReconstructSide photometric stereo (cast shadows marked) + integration -> normal, albedo, confidence, height (mm)
 //   FitSide         Principled parameters with Ceres (fitting/principled_fit.h)
 
 #include <filesystem>
@@ -46,9 +46,13 @@ struct SideReconstruction {
   reconstruction::PhotometricStereoResult photometric_stereo;
   Image height_mm;  // integrated (distant lights) or refined with the near-light model
   Image valid;      // 1 channel: 1 where the surface is data (not a hole, seen by the camera)
+  // Share of the (pixel, observation) pairs marked kCastShadow (0 when marking is off).
+  double cast_shadow_share = 0.0;
 };
 
-SideReconstruction ReconstructSide(const Stack& stack, const StageOptions& options, const Image& alpha,
+// Marks the stack's cast shadows (kCastShadow) when options.mark_cast_shadows, so that FitSide and
+// FitResidualMap on the same stack leave them out too.
+SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress = {});
 
 // The integration step of ReconstructSide on side->photometric_stereo (grid: the side's whole grid;
@@ -58,6 +62,9 @@ void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& option
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
+
+// The report's "cast shadows" step: off, or the share marked and the marking time (seconds).
+StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds);
 
 // Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
 // over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no

@@ -9,6 +9,7 @@
 #include "capture/stack_builder.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
+#include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
 
@@ -146,12 +147,30 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
             << " pixels (" << sample_grid.width << " x " << sample_grid.height << ")";
   double solve_seconds = 0.0;
 
-  // One sweep of photometric stereo at the given heights (nullptr: the anchor plane).
-  auto solve_sweep = [&](const Image* height, Stack* sample, const char* stage) {
+  // Cast shadows (reconstruction/cast_shadows.h): a band is marked with the whole map's heights
+  // (its rows offset), so that shadows cast from outside the band are found as in a one-band run.
+  double shadow_seconds = 0.0;
+  reconstruction::CastShadowCounts shadow_counts;  // of the last photometric stereo sweep
+  auto mark = [&](const Image& height, Stack* stack) {
+    const double start = StageClock();
+    const reconstruction::CastShadowCounts counts = reconstruction::MarkCastShadows(height, grid, stack, options.cast_shadows);
+    shadow_seconds += StageClock() - start;
+    return counts;
+  };
+
+  // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
+  // cast shadows marked from the whole-map heights `marks_from` (nullptr: none).
+  auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage) {
     PhotometricStereoResult full = EmptyPs(grid);
+    shadow_counts = {};
     for (int b = 0; b < bands.count(); ++b) {
       Stack band = bands.Build(frames, b);
       if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
+      if (marks_from) {
+        const reconstruction::CastShadowCounts counts = mark(*marks_from, &band);
+        shadow_counts.marked += counts.marked;
+        shadow_counts.examined += counts.examined;
+      }
       const double start = StageClock();
       const Image band_height = height ? CropRows(*height, bands.Row0(b), bands.Rows(b))
                                        : Image(grid.width, bands.Rows(b), 1,
@@ -194,14 +213,27 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ps_options.diffuse_roughness = roughness;
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
-    ps = solve_sweep(nullptr, nullptr, "photometric stereo");
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
-    ps = solve_sweep(nullptr, &out.sample, "photometric stereo");
-    if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, "photometric stereo");  // without the frames left out
+    ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
+    if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");  // without the frames left out
   }
   const bool near = std::any_of(out.sample.lights.begin(), out.sample.lights.end(),
                                 [](const LightModel& l) { return l.type == LightType::kPoint; });
+  // The whole-map heights the final marks come from (empty: marking off).
+  Image shadow_height;
+
+  // Distant lights (or near ones without refinement): integrate, mark, one more sweep
+  // (RunPhotometricStereoMarkingShadows band by band). The solve stays at the anchor plane.
+  if (options.mark_cast_shadows && !(near && ps_options.refine_height)) {
+    reconstruction::IntegrationOptions integration = ps_options.integration;
+    integration.pitch_mm = grid.pitch_mm;
+    const double start = StageClock();
+    shadow_height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
+    shadow_seconds += StageClock() - start;
+    ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)");
+  }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
   if (near && ps_options.refine_height) {
@@ -212,11 +244,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       const double start = StageClock();
       Image height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
       solve_seconds += StageClock() - start;
-      PhotometricStereoResult next = solve_sweep(&height, nullptr, "photometric stereo (near-light round)");
+      const reconstruction::CastShadowCounts kept_counts = shadow_counts;
+      PhotometricStereoResult next = solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
+                                                 "photometric stereo (near-light round)");
       const double change = MeanAngleDeg(next.normal, ps.normal);
       if (change >= previous_change) {
         LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
                      << " deg after " << previous_change << " deg); kept round " << it - 1;
+        shadow_counts = kept_counts;  // the kept round's marks (the bands are marked again below)
         break;
       }
       previous_change = change;
@@ -228,6 +263,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       if (change < ps_options.near_tolerance_deg) break;
     }
   }
+  if (options.mark_cast_shadows && near && ps_options.refine_height && ps.near_iterations > 0) shadow_height = ps.height_mm;
   if (near && ps.height_mm.empty()) {
     ps.height_mm = Image(grid.width, grid.height, 1, static_cast<float>(ps_options.integration.mean_height_mm), grid.pitch_mm);
   }
@@ -250,6 +286,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
   out.reconstruction.photometric_stereo = std::move(ps);
+  // The fit's sample and every band built from here on carry the final marks.
+  if (!shadow_height.empty()) mark(shadow_height, &out.sample);
+  out.reconstruction.cast_shadow_share = shadow_height.empty() ? 0.0 : shadow_counts.share();
   IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
   const SideReconstruction& geometry = out.reconstruction;
 
@@ -268,7 +307,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.fit = fitting::StartPixelMaps(model, grid);
   fitting::PixelTally tally;
   for (int b = 0; b < bands.count(); ++b) {
-    const Stack band = bands.Build(frames, b);
+    Stack band = bands.Build(frames, b);
+    if (!shadow_height.empty()) mark(shadow_height, &band);
     const int row0 = bands.Row0(b), rows = bands.Rows(b);
     const fitting::SurfaceGeometry band_geometry{CropRows(geometry.photometric_stereo.normal, row0, rows),
                                                  CropRows(geometry.photometric_stereo.albedo, row0, rows),
@@ -297,7 +337,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   double residual_sum = 0.0;
   std::size_t residual_pixels = 0;
   for (int b = 0; b < bands.count(); ++b) {
-    const Stack band = bands.Build(residual_frames, b);
+    Stack band = bands.Build(residual_frames, b);
+    if (!shadow_height.empty()) mark(shadow_height, &band);
     const int row0 = bands.Row0(b), rows = bands.Rows(b);
     SideReconstruction band_geometry;
     band_geometry.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);
@@ -312,6 +353,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
   out.residual_mean = residual_pixels ? residual_sum / static_cast<double>(residual_pixels) : 0.0;
   report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", StageClock() - start});
+  // Marking time of every sweep (photometric stereo, fit, residual), with the integration it needed.
+  report->steps.push_back(CastShadowStep(options, out.reconstruction.cast_shadow_share, near, shadow_seconds));
   return out;
 }
 

@@ -70,7 +70,7 @@ class EndToEndAccuracy : public ::testing::Test {
 
   fitting::FitResult Fit(const StageOptions& options) {
     const Image alpha(stack_.grid.width, stack_.grid.height, 1, 1.0f, stack_.grid.pitch_mm);
-    const SideReconstruction geometry = ReconstructSide(stack_, options, alpha, &report_);
+    const SideReconstruction geometry = ReconstructSide(&stack_, options, alpha, &report_);
     return FitSide(stack_, geometry, options, &report_);
   }
 

@@ -466,6 +466,39 @@ TEST_F(PrincipledFitTest, DarkObservationAndMissingNormalsStayFinite) {
   EXPECT_EQ(result.convergence.pixels_fitted, 63);
 }
 
+TEST_F(PrincipledFitTest, CastShadowFlaggedObservationsAreNotData) {
+  // Issue 4: the pipeline marks cast shadows (reconstruction/cast_shadows.h) and the fit must leave
+  // them out. Two stacks differ only inside the kCastShadow pixels of two lights (there: the true
+  // render, or black with a bright speck); the fits must be identical, bit for bit.
+  SceneSpec spec;
+  spec.width = 8;
+  spec.height = 8;
+  spec.lights_deg = GrazingLights();
+  spec.material = [](int, int) { return PrincipledParams<double>(); };
+  Scene clean = MakeScene(spec);
+  for (int k : {0, 3}) {
+    Observation& o = clean.stack.observations[static_cast<std::size_t>(k)];
+    o.flags.assign(o.rgb.pixel_count(), 0);
+    for (std::size_t i = 0; i < o.flags.size(); i += 3) o.flags[i] |= kCastShadow;
+  }
+  Scene shadowed = clean;
+  for (int k : {0, 3}) {
+    Observation& o = shadowed.stack.observations[static_cast<std::size_t>(k)];
+    const std::size_t n = o.rgb.pixel_count();
+    for (std::size_t i = 0; i < n; i += 3)
+      for (int c = 0; c < 3; ++c) o.rgb.data()[c * n + i] = (i % 2) ? 0.0f : 5.0f;
+  }
+  const FitResult a = FitPrincipled(clean.stack, clean.geometry, FitOptions());
+  const FitResult b = FitPrincipled(shadowed.stack, shadowed.geometry, FitOptions());
+  ExpectFinite(b);
+  EXPECT_EQ(a.base_color.data(), b.base_color.data());
+  for (int p = 0; p < kFitParameterCount; ++p) EXPECT_EQ(a.parameter_maps[p].data(), b.parameter_maps[p].data()) << p;
+  ASSERT_EQ(a.clusters.size(), b.clusters.size());
+  for (std::size_t c = 0; c < a.clusters.size(); ++c) {
+    EXPECT_EQ(a.clusters[c].rms_relative_residual, b.clusters[c].rms_relative_residual);
+  }
+}
+
 TEST_F(PrincipledFitTest, RunsAreDeterministic) {
   SceneSpec spec;
   spec.width = 8;

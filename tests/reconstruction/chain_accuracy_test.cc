@@ -57,8 +57,8 @@ ChainErrors RunChain(const std::string& rig_name) {
   StageOptions stages = OptionsForPreset(Preset::kBalanced);
   RunReport report;
   PreparedCapture prepared = PrepareCapture(dir / synthetic::kCaptureSubdir, stages, &report);
-  const Stack stack = BuildSideStack(prepared, "front", stages, &report);
-  const SideReconstruction rec = ReconstructSide(stack, stages, Image(), &report);
+  Stack stack = BuildSideStack(prepared, "front", stages, &report);
+  const SideReconstruction rec = ReconstructSide(&stack, stages, Image(), &report);
   fs::remove_all(dir);
 
   const synthetic::SceneTruth& truth = scene.truth;

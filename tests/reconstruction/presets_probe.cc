@@ -43,8 +43,8 @@ int main(int argc, char** argv) {
       stages.photometric_stereo.solver = reconstruction::ParsePsSolver(solver);
       RunReport report;
       PreparedCapture prepared = PrepareCapture(dir / "capture", stages, &report);
-      const Stack stack = BuildSideStack(prepared, "front", stages, &report);
-      const SideReconstruction rec = ReconstructSide(stack, stages, Image(), &report);
+      Stack stack = BuildSideStack(prepared, "front", stages, &report);
+      const SideReconstruction rec = ReconstructSide(&stack, stages, Image(), &report);
       const auto& ps = rec.photometric_stereo;
       std::vector<double> errors;
       double confidence = 0.0, albedo[3] = {0, 0, 0};

@@ -1,0 +1,243 @@
+#include "reconstruction/cast_shadows.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <vector>
+
+#include "core/logging.h"
+#include "core/parallel.h"
+#include "reconstruction/normal_integration.h"
+
+namespace u3mscan::reconstruction {
+namespace {
+
+using Eigen::Vector3d;
+
+// The height map as a bilinear surface over continuous pixel coordinates (u = column, v = row,
+// pixel centres at integers); coordinates are clamped to the map.
+class HeightField {
+ public:
+  explicit HeightField(const Image& height_mm) : h_(height_mm.plane(0).data()), w_(height_mm.width()), rows_(height_mm.height()) {}
+  int width() const { return w_; }
+  int height() const { return rows_; }
+  float At(double u, double v) const {
+    u = std::clamp(u, 0.0, static_cast<double>(w_ - 1));
+    v = std::clamp(v, 0.0, static_cast<double>(rows_ - 1));
+    const int c0 = std::min(static_cast<int>(u), std::max(0, w_ - 2));
+    const int r0 = std::min(static_cast<int>(v), std::max(0, rows_ - 2));
+    const int c1 = std::min(c0 + 1, w_ - 1), r1 = std::min(r0 + 1, rows_ - 1);
+    const float fu = static_cast<float>(u - c0), fv = static_cast<float>(v - r0);
+    const float* a = h_ + static_cast<std::size_t>(r0) * w_;
+    const float* b = h_ + static_cast<std::size_t>(r1) * w_;
+    const float top = a[c0] + fu * (a[c1] - a[c0]);
+    const float bottom = b[c0] + fu * (b[c1] - b[c0]);
+    return top + fv * (bottom - top);
+  }
+
+ private:
+  const float* h_;
+  int w_, rows_;
+};
+
+double MeanAngleDeg(const Image& a, const Image& b) {
+  const std::size_t n = a.pixel_count();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
+    const Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
+    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
+  }
+  return n > 0 ? sum / static_cast<double>(n) * 180.0 / std::numbers::pi : 0.0;
+}
+
+double Seconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+}  // namespace
+
+bool CastShadowOptions::Check() const {
+  return std::isfinite(step_px) && step_px > 0.0 && step_px <= 4.0 && std::isfinite(bias_px) && bias_px >= 0.0;
+}
+
+CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& height_grid, Stack* stack,
+                                 const CastShadowOptions& options) {
+  if (!options.Check()) throw std::invalid_argument("cast shadows: options fail Check()");
+  if (height_mm.channels() != 1 || height_mm.width() != height_grid.width || height_mm.height() != height_grid.height ||
+      !(height_grid.pitch_mm > 0.0) || height_grid.width < 1 || height_grid.height < 1) {
+    throw std::invalid_argument("cast shadows: height_mm must be 1 channel on height_grid");
+  }
+  const MetricGrid& grid = stack->grid;
+  const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
+  // Observations per light; kCastShadow cleared, flags allocated.
+  std::vector<std::vector<std::size_t>> by_light(stack->lights.size());
+  for (std::size_t k = 0; k < stack->observations.size(); ++k) {
+    Observation& o = stack->observations[k];
+    if (o.light < 0 || static_cast<std::size_t>(o.light) >= stack->lights.size()) {
+      throw std::invalid_argument("cast shadows: observation " + std::to_string(k) + " has no light");
+    }
+    if (o.flags.empty()) o.flags.assign(pixels, 0);
+    if (o.flags.size() != pixels) throw std::invalid_argument("cast shadows: flags must have width*height entries");
+    for (auto& f : o.flags) f = static_cast<std::uint8_t>(f & ~kCastShadow);
+    by_light[static_cast<std::size_t>(o.light)].push_back(k);
+  }
+
+  const HeightField field(height_mm);
+  float max_height = -std::numeric_limits<float>::infinity();
+  for (float z : height_mm.plane(0)) {
+    if (std::isfinite(z)) max_height = std::max(max_height, z);
+  }
+  const double p = height_grid.pitch_mm;
+  const double u_max = height_grid.width - 1, v_max = height_grid.height - 1;
+  std::atomic<long long> marked{0};
+
+  for (std::size_t light = 0; light < by_light.size(); ++light) {
+    const std::vector<std::size_t>& observations = by_light[light];
+    if (observations.empty()) continue;
+    const LightModel& model = stack->lights[light];
+    ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t begin, std::size_t end) {
+      long long chunk_marked = 0;
+      for (std::size_t row = begin; row < end; ++row) {
+        for (int col = 0; col < grid.width; ++col) {
+          const Vector3d centre = grid.PixelCentreInWorld(col, static_cast<int>(row));
+          // The pixel centre in the height map's continuous pixel coordinates.
+          double u = (centre.x() - height_grid.x0_mm) / p - 0.5;
+          double v = (height_grid.y1_mm - centre.y()) / p - 0.5;
+          constexpr double kInside = 1e-6;  // rounding of the grid's mm coordinates, in pixels
+          if (u < -kInside || v < -kInside || u > u_max + kInside || v > v_max + kInside) continue;
+          u = std::clamp(u, 0.0, u_max);
+          v = std::clamp(v, 0.0, v_max);
+          const double z0 = field.At(u, v);
+          if (!std::isfinite(z0)) continue;
+          const Vector3d point(centre.x(), centre.y(), z0);
+          const Vector3d d = model.DirectionFrom(point);
+          bool shadow = false;
+          if (!(d.z() > 0.0)) {
+            shadow = true;  // below the sample plane: lights nothing
+          } else {
+            const double speed = std::hypot(d.x(), d.y());  // horizontal length per unit ray length
+            const double bias_mm = speed > 1e-12 ? options.bias_px * p * d.z() / speed : 0.0;
+            if (speed > 1e-12 && z0 + bias_mm < max_height) {
+              const double du = options.step_px * d.x() / speed, dv = -options.step_px * d.y() / speed;
+              const double dz = options.step_px * p * d.z() / speed;
+              // A point light ends the ray: no march past its horizontal distance.
+              double steps_left = std::numeric_limits<double>::infinity();
+              if (model.type == LightType::kPoint) {
+                steps_left = std::hypot(model.position_in_world_mm.x() - point.x(),
+                                        model.position_in_world_mm.y() - point.y()) / (options.step_px * p);
+              }
+              double z = z0;
+              for (double s = 1.0; s <= steps_left; s += 1.0) {
+                u += du, v += dv, z += dz;
+                if (u < 0.0 || v < 0.0 || u > u_max || v > v_max || z > max_height) break;
+                if (z < field.At(u, v) - bias_mm) {
+                  shadow = true;
+                  break;
+                }
+              }
+            }
+          }
+          if (!shadow) continue;
+          const std::size_t i = row * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(col);
+          for (std::size_t k : observations) stack->observations[k].flags[i] |= kCastShadow;
+          chunk_marked += static_cast<long long>(observations.size());
+        }
+      }
+      marked += chunk_marked;
+    });
+  }
+  CastShadowCounts counts;
+  counts.marked = marked.load();
+  counts.examined = static_cast<long long>(pixels) * static_cast<long long>(stack->observations.size());
+  return counts;
+}
+
+CastShadowCounts MarkCastShadows(const Image& height_mm, Stack* stack, const CastShadowOptions& options) {
+  return MarkCastShadows(height_mm, stack->grid, stack, options);
+}
+
+PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const PhotometricStereoOptions& options,
+                                                           const CastShadowOptions& shadow_options,
+                                                           ShadowMarkingSummary* summary,
+                                                           const ProgressCallback& progress) {
+  if (!shadow_options.Check()) throw std::invalid_argument("cast shadows: options fail Check()");
+  ShadowMarkingSummary local;
+  ShadowMarkingSummary& out = summary ? *summary : local;
+  out = {};
+  const bool near = options.refine_height &&
+                    std::any_of(stack->lights.begin(), stack->lights.end(),
+                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  IntegrationOptions integration = options.integration;
+  integration.pitch_mm = stack->grid.pitch_mm;
+
+  // First solve without marks (a stack marked before, e.g. solved twice, starts clean): the plain
+  // near-light model on the anchor plane, or the distant one.
+  for (Observation& o : stack->observations) {
+    for (auto& f : o.flags) f = static_cast<std::uint8_t>(f & ~kCastShadow);
+  }
+  PhotometricStereoOptions first = options;
+  first.refine_height = false;
+  PhotometricStereoResult result = RunPhotometricStereo(*stack, first, progress);
+  // The roughness chosen on the first solve, kept for the solves with marks.
+  PhotometricStereoOptions again = options;
+  if (options.diffuse_model == DiffuseModel::kBurley) {
+    if (result.diffuse_roughness >= 0.0) {
+      again.diffuse_roughness = result.diffuse_roughness;
+    } else {
+      again.diffuse_model = DiffuseModel::kLambert;
+    }
+  }
+  const double roughness = result.diffuse_roughness;
+
+  if (!near) {
+    const double start = Seconds();
+    const Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
+    out.counts = MarkCastShadows(height, stack, shadow_options);
+    out.mark_seconds += Seconds() - start;
+    // Nothing marked (e.g. lights high enough for the relief): the first solve stands.
+    if (out.counts.marked == 0) return result;
+    // Distant lights do not depend on the height; near lights without refinement stay on the plane.
+    const Image kept_height = std::move(result.height_mm);
+    result = SolvePhotometricStereoAt(*stack, again, kept_height.empty() ? height : kept_height);
+    result.height_mm = kept_height;
+    result.diffuse_roughness = roughness;
+    return result;
+  }
+
+  // Near point lights: RunPhotometricStereo's refinement, marks renewed after each integration.
+  double previous_change = std::numeric_limits<double>::infinity();
+  for (int it = 1; it <= options.max_near_iterations; ++it) {
+    ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
+    Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
+    const double start = Seconds();
+    const CastShadowCounts counts = MarkCastShadows(height, stack, shadow_options);
+    out.mark_seconds += Seconds() - start;
+    PhotometricStereoResult next = SolvePhotometricStereoAt(*stack, again, height);
+    const double change = MeanAngleDeg(next.normal, result.normal);
+    if (change >= previous_change) {
+      LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
+                   << " deg after " << previous_change << " deg); kept round " << it - 1;
+      // The stack's marks must be those the kept result was solved with.
+      out.counts = MarkCastShadows(result.height_mm, stack, shadow_options);
+      break;
+    }
+    previous_change = change;
+    result = std::move(next);
+    result.height_mm = std::move(height);
+    result.near_iterations = it;
+    result.last_normal_change_deg = change;
+    out.counts = counts;
+    if (change < options.near_tolerance_deg) break;
+  }
+  result.diffuse_roughness = roughness;
+  ReportProgress(progress, "photometric stereo", 1.0);
+  return result;
+}
+
+}  // namespace u3mscan::reconstruction
