@@ -108,11 +108,8 @@ void Capture::Normalise(std::size_t index, const FrameLoadOptions& options, Deco
 std::shared_ptr<const CompactFrame> Capture::CachedRaw(std::size_t index) const {
   {
     std::lock_guard<std::mutex> lock(cache_->mutex);
-    for (auto it = cache_->entries.begin(); it != cache_->entries.end(); ++it) {
-      if (it->first == index) {
-        cache_->entries.splice(cache_->entries.begin(), cache_->entries, it);
-        return it->second;
-      }
+    for (const auto& entry : cache_->entries) {
+      if (entry.first == index) return entry.second;
     }
   }
   // Decode outside the lock: other threads keep reading. Two threads asking for the same frame
@@ -123,10 +120,10 @@ std::shared_ptr<const CompactFrame> Capture::CachedRaw(std::size_t index) const 
   for (const auto& entry : cache_->entries) {
     if (entry.first == index) return entry.second;
   }
-  while (!cache_->entries.empty() && cache_->bytes + decoded->bytes() > options_.raw_cache_bytes) {
-    cache_->bytes -= cache_->entries.back().second->bytes();
-    cache_->entries.pop_back();
-  }
+  // Full: keep the frames already cached and hand this one out uncached. The band sweeps read the
+  // frames in the same order every time, so evicting (least recently used) would miss on every
+  // read once the frames outnumber the cache; keeping them hits on the cached ones each sweep.
+  if (cache_->bytes + decoded->bytes() > options_.raw_cache_bytes) return decoded;
   cache_->entries.emplace_front(index, decoded);
   cache_->bytes += decoded->bytes();
   return decoded;

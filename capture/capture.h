@@ -9,8 +9,9 @@
 //     row band, only the rows of the region. RAW files can only be decoded whole, so the decoded
 //     frame is kept in a cache in libraw's 16-bit form (7 bytes a pixel) so that a sweep of row
 //     bands over all frames decodes each RAW once. The cache is bounded by
-//     CaptureOptions::raw_cache_bytes (least recently used frames are dropped first) and can be
-//     emptied with ReleaseCache(). 32 frames of 36 MP: 8.1 GB of cache for a one-decode sweep,
+//     CaptureOptions::raw_cache_bytes (when full it keeps the frames it has and decodes the others
+//     again on every read: band sweeps read the frames in one order, where dropping the least
+//     recently used would miss every time) and can be emptied with ReleaseCache(). 32 frames of 36 MP: 8.1 GB of cache for a one-decode sweep,
 //     against 15 GB as float.
 // Thread safety: all const methods may be called from several threads at once. Copies of a
 // Capture share one cache.
@@ -96,7 +97,7 @@ class Capture {
 
   struct Cache {
     std::mutex mutex;
-    std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // most recent first
+    std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // latest first
     std::size_t bytes = 0;
   };
   std::shared_ptr<Cache> cache_ = std::make_shared<Cache>();

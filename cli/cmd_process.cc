@@ -55,8 +55,8 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_flag("--no-cast-shadows", args->options.no_cast_shadows,
                "Do not mark cast shadows from the heights (on in every preset; for comparisons)");
   sub.add_option("--max-memory", args->options.max_memory_gib,
-                 "Memory budget (GiB) of one band's stack: a larger scan is processed in bands of rows "
-                 "(docs/process.md, Large scans)")
+                 "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
+                 "separately, of the RAW decode cache (docs/process.md, Large scans)")
       ->capture_default_str()
       ->check(CLI::Range(1e-6, 1e6));
   sub.add_option("--name", args->name, "File name of the material (one capture only; default: the capture folder's name)");

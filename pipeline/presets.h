@@ -9,6 +9,7 @@
 #include <string>
 
 #include "capture/calibrate.h"
+#include "capture/capture.h"
 #include "fitting/principled_fit.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
@@ -24,6 +25,7 @@ Preset ParsePreset(const std::string& name);
 
 // Every stage's options, as one preset sets them.
 struct StageOptions {
+  CaptureOptions capture;  // the RAW decode cache's bound (ProcessCapture: --max-memory)
   CalibrationOptions calibration;
   reconstruction::PhotometricStereoOptions photometric_stereo;
   reconstruction::IntegrationOptions integration;  // distant lights (near lights integrate inside PS)

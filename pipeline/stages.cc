@@ -47,7 +47,7 @@ double StageClock() {
 PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOptions& options, RunReport* report,
                                const ProgressCallback& progress) {
   double start = StageClock();
-  Capture capture = Capture::Open(capture_dir);
+  Capture capture = Capture::Open(capture_dir, options.capture);
   report->steps.push_back({"read manifest", true, std::to_string(capture.frame_count()) + " frames listed", StageClock() - start});
 
   std::vector<std::string> sides;

@@ -236,11 +236,24 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
+  bool near_rounds_capped = false;
+  int near_round_limit = ps_options.max_near_iterations;
   if (near && ps_options.refine_height) {
     reconstruction::IntegrationOptions integration = ps_options.integration;
     integration.pitch_mm = grid.pitch_mm;
+    // Each round re-reads and re-solves every band; with the DCT integrator at most
+    // kMaxBandedNearRounds rounds run (the fast preset's limit), whatever the preset asks.
+    constexpr int kMaxBandedNearRounds = 3;
+    const int max_rounds = bands.count() > 1 && integration.method == reconstruction::Integrator::kDct
+                               ? std::min(ps_options.max_near_iterations, kMaxBandedNearRounds)
+                               : ps_options.max_near_iterations;
+    near_rounds_capped = max_rounds < ps_options.max_near_iterations;
+    near_round_limit = max_rounds;
+    if (near_rounds_capped)
+      LogInfo() << "photometric stereo: near-light rounds capped at " << max_rounds << " in a run of " << bands.count()
+                << " bands (preset: " << ps_options.max_near_iterations << ")";
     double previous_change = std::numeric_limits<double>::infinity();
-    for (int it = 1; it <= ps_options.max_near_iterations; ++it) {
+    for (int it = 1; it <= max_rounds; ++it) {
       const double start = StageClock();
       Image height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
       solve_seconds += StageClock() - start;
@@ -278,7 +291,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                            bands.build_seconds()});
   report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(ps_options.solver) + ", tiled)", true,
                            near ? "near point lights, height refined " + std::to_string(ps.near_iterations) +
-                                      " rounds (one sweep over the bands each)"
+                                      " rounds (one sweep over the bands each" +
+                                      (near_rounds_capped ? ", at most " + std::to_string(near_round_limit) + " in bands)" : ")")
                                 : "distant lights",
                            solve_seconds});
   if (!near) {

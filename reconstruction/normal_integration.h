@@ -17,9 +17,13 @@
 //    matrix-free by DCT-preconditioned conjugate gradients, coarse to fine. Edges that disagree with
 //    the surface (discontinuities: fabric edges, tears, holes, wrong normals) lose their weight, so
 //    a jump stays where it is instead of being spread over the map.
+// Speed: the conjugate gradients' preconditioner (the DCT Poisson solve) runs on the next
+// 2-3-5-smooth size >= the map, zero-padded, because FFT lengths with a large prime factor are
+// several times slower; the exact unmasked kDct solve stays on the map's size.
 // Memory: no matrices. kDct without mask: 7 float and 2 double planes of the map size; a mask adds
-// 4 double planes (CG), kRobust 2 more float planes (robust weights) and its coarser levels (1/3
-// more). 36 MP DCT: ~1.6 GB plus input and output.
+// 4 double planes (CG) and one padded double plane (preconditioner; ~4 % larger than the map at
+// 36 MP), kRobust 2 more float planes (robust weights) and its coarser levels (1/3 more). 36 MP
+// DCT: ~1.6 GB plus input and output.
 
 #include <string>
 
@@ -92,6 +96,12 @@ namespace internal {
 // inverse, via one complex FFT of length N (Makhoul 1980). Exposed for tests.
 void DctLine(double* values, int n);
 void InverseDctLine(double* values, int n);
+// The same for two lines a and b at once through one complex FFT of a + i b (what the 2-D
+// transforms use).
+void DctLinePair(double* a, double* b, int n);
+void InverseDctLinePair(double* a, double* b, int n);
+// Smallest length >= n with prime factors 2, 3 and 5 only: the padded preconditioner's sizes.
+int SmoothLength(int n);
 }  // namespace internal
 
 }  // namespace u3mscan::reconstruction

@@ -167,7 +167,19 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   capture.LoadFrameRegion(0, 0, 0, 8, 8);
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.LoadFrameRegion(1, 0, 0, 8, 8);
-  EXPECT_EQ(capture.cached_bytes(), frame_bytes);  // frame 0 was dropped for frame 1
+  EXPECT_EQ(capture.cached_bytes(), frame_bytes);  // full: frame 0 kept, frame 1 decoded uncached
+  // Sweeps of row bands over both RAW frames (as the tiled pipeline reads them): the cache never
+  // exceeds its bound, and every read gives the frame's own rows.
+  const DecodedFrame full0 = capture.LoadFrame(0), full1 = capture.LoadFrame(1);
+  for (int sweep = 0; sweep < 2; ++sweep)
+    for (int band = 0; band < kSize; band += 16)
+      for (std::size_t index : {std::size_t{0}, std::size_t{1}}) {
+        const DecodedFrame part = capture.LoadFrameRows(index, band, 16);
+        const DecodedFrame& full = index == 0 ? full0 : full1;
+        EXPECT_EQ(part.rgb.at(2, 3, 40), full.rgb.at(2, band + 3, 40));
+        EXPECT_LE(capture.cached_bytes(), options.raw_cache_bytes);
+      }
+  EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.LoadFrameRegion(3, 0, 0, 8, 8);           // TIFF regions are read directly
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.ReleaseCache();
