@@ -133,7 +133,7 @@ TEST_F(EndToEndAccuracy, SpecularAndRoughnessWithinIssue6Targets) {
 // brings it within the target (guards against the refinement being silently disabled or broken).
 TEST_F(EndToEndAccuracy, NormalRefinementRemovesTheSpecularBias) {
   StageOptions without = options_;
-  without.fit.normal_refinement_passes = 0;
+  without.fit.normal_refinement_max_passes = 0;
   const double biased = Fit(without).report(fitting::FitParameter::kSpecular).value;
   const double refined = Fit(options_).report(fitting::FitParameter::kSpecular).value;
   std::cout << "[ MEASURED ] specular without normal refinement " << biased << ", with " << refined << "\n";

@@ -565,7 +565,7 @@ TEST_F(PrincipledFitTest, GrossMisfitClusterMeasuresNothing) {
   options.samples_per_cluster = 48;
   options.clustering.cluster_count = 4;
   options.max_iterations = 40;
-  options.normal_refinement_passes = 0;  // keep the test fast; the rule does not depend on it
+  options.normal_refinement_max_passes = 0;  // keep the test fast; the rule does not depend on it
   options.unusable_relative_rms = kMismatchFlagRelativeRms;
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
   ExpectFinite(result);
