@@ -244,6 +244,9 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       reconstruction = ReconstructSide(stack, stages, alpha, &report, progress);
       fit = FitSide(stack, reconstruction, stages, &report, progress);
+      const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
+                                    [](const LightModel& l) { return l.type == LightType::kPoint; });
+      AdoptFittedNormals(fit, stack.grid, near, stages, &reconstruction, &report, progress);
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
     } else {
       TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations, &report, progress);

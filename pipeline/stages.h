@@ -59,6 +59,16 @@ void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& option
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 
+// After the fit: the fit's refined normals (FitResult::normals; nothing happens when it is empty)
+// replace the photometric-stereo normals in `side`, and the height is integrated again from them
+// (IntegrateSide's integrator, also for near lights, whose height came from the refinement rounds).
+// Photometric stereo's Lambertian normals lean toward a glossy fabric's highlights; the written
+// normal map, the height and the residual map then all belong with the fitted parameters
+// (docs/fitting.md, "Normal refinement").
+void AdoptFittedNormals(const fitting::FitResult& fit, const MetricGrid& grid, bool near, const StageOptions& options,
+                        SideReconstruction* side, RunReport* report,
+                        const ProgressCallback& progress = {});
+
 // Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
 // over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
 // observation is usable). `mean_out` receives the mean over usable pixels.
