@@ -887,6 +887,27 @@ bool FitOptions::Check() const {
          unreliable_pixel_share >= 0.0 && unreliable_pixel_share < 1.0;
 }
 
+std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector<ClusterFit>* clusters) {
+  std::vector<int> left_out;
+  if (capture_saturated) return left_out;
+  for (ClusterFit& c : *clusters) {
+    ParameterEstimate& roughness = c.parameters[kRoughness];
+    const ParameterEstimate& specular = c.parameters[kSpecular];
+    if (!roughness.measured || roughness.value > kHiddenLobeRoughness || specular.measured) continue;
+    char buffer[360];
+    std::snprintf(buffer, sizeof buffer,
+                  "the fit ended at the lower bound (roughness %.3g <= %.3g) with specular held at its default and no "
+                  "saturated highlight in the capture: a lobe that narrow falls between the lights, so the solve hid "
+                  "the held specular lobe instead of measuring a roughness",
+                  roughness.value, kHiddenLobeRoughness);
+    roughness.measured = false;
+    roughness.std_dev = std::numeric_limits<double>::infinity();
+    roughness.reason = buffer;
+    left_out.push_back(c.id);
+  }
+  return left_out;
+}
+
 // Per-observation constants of `stack` with the given noise levels (MedianLuminance of the stack
 // itself when `levels` is empty: an observation without signal borrows the typical level, so that
 // its noise floor, and with it every weight, stays finite).
@@ -1085,31 +1106,15 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
     }
   }
 
-  // Hidden lobe (docs/fitting.md): a roughness at its lower bound while specular is held at its
-  // default is a held lobe shrunk to a spike that falls between the lights, not a measurement
-  // (twill / near: roughness 0 for 0.71, 49 % re-render error). Only a capture with saturated
-  // highlights can measure so narrow a lobe (the mirror-like case: clipped highlights say where the
-  // spike is), so the rule holds only when no observation of the capture saturates.
+  // Hidden lobe (docs/fitting.md, LeaveOutHiddenLobeRoughness): only a capture with saturated
+  // highlights can measure a lobe at the lower bound.
   std::size_t capture_saturated = 0;
   for (const Observation& o : stack.observations) {
     for (std::uint8_t f : o.flags) capture_saturated += (f & kSaturated) != 0 ? 1 : 0;
   }
-  if (capture_saturated == 0) {
-    for (ClusterFit& c : model.clusters) {
-      ParameterEstimate& roughness = c.parameters[kRoughness];
-      const ParameterEstimate& specular = c.parameters[kSpecular];
-      if (!roughness.measured || roughness.value > kHiddenLobeRoughness || specular.measured) continue;
-      char buffer[360];
-      std::snprintf(buffer, sizeof buffer,
-                    "the fit ended at the lower bound (roughness %.3g <= %.3g) with specular held at its default and "
-                    "no saturated highlight in the capture: a lobe that narrow falls between the lights, so the solve "
-                    "hid the held specular lobe instead of measuring a roughness",
-                    roughness.value, kHiddenLobeRoughness);
-      roughness.measured = false;
-      roughness.std_dev = std::numeric_limits<double>::infinity();
-      roughness.reason = buffer;
-      LogWarning() << "fitting: cluster " << c.id << ": roughness " << buffer;
-    }
+  for (int id : LeaveOutHiddenLobeRoughness(capture_saturated > 0, &model.clusters)) {
+    LogWarning() << "fitting: cluster " << id << ": roughness "
+                 << model.clusters[id].parameters[kRoughness].reason;
   }
 
   // Reliability of what the clusters measured (FitOptions, "Reliability"): evidence that the value

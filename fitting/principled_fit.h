@@ -241,6 +241,14 @@ struct SurfaceGeometry {
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
                         const ProgressCallback& progress = {});
 
+// Hidden-lobe rule (docs/fitting.md), applied by FitPrincipled / FitClusterModel after the cluster
+// fits: a cluster whose roughness ended at the fit's lower bound (<= 0.032, GGX's alpha clamp)
+// while specular was left out (held at its U3M default 0.5) hid the held lobe by shrinking it to a
+// spike between the lights; unless the capture has saturated highlights (which can pin such a
+// spike, the mirror-like case), that roughness is no measurement and is left out with the reason.
+// Returns the ids of the clusters changed.
+std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector<ClusterFit>* clusters);
+
 // Renders observation `observation_index` of `stack` (its light, view, irradiance and grid; its rgb
 // is ignored) with the fitted maps, for held-out checks: 3-channel linear RGB in the Stack's units.
 Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
