@@ -122,7 +122,9 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
   // re-render 2.5 % off although normals, roughness and specular are within their targets. That
   // offset lies between the synthetic scanner's point lights and the Stack's irradiance model,
   // upstream of the fit (docs/fitting.md, "Through the whole pipeline").
-  if (std::string(GetParam()) != "near") EXPECT_LT(e.rerender_relative_rmse, kRerenderTolerance);
+  if (std::string(GetParam()) != "near") {
+    EXPECT_LT(e.rerender_relative_rmse, kRerenderTolerance);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Rigs, ProcessTruth, ::testing::Values("distant", "near"));
