@@ -1,9 +1,10 @@
 // End-to-end accuracy of the fit (issue 6 targets) on a tiny noise-free synthetic capture: the
-// bump field of tests/support/bump_scene.h on the `distant` rig, written by the synthetic scanner,
-// calibrated, rectified, reconstructed (photometric stereo) and fitted by the pipeline's stages.
+// bump field of tests/support/bump_scene.h on the `distant` and `near` rigs, written by the
+// synthetic scanner, calibrated, rectified, reconstructed (photometric stereo) and fitted by the
+// pipeline's stages at the default preset.
 //
 // Regression test of the normal refinement in FitPrincipled (docs/fitting.md): with the
-// photometric-stereo normals as they are (normal_refinement_passes = 0) specular 0.5 came out 0.23
+// photometric-stereo normals as they are (normal_refinement_max_passes = 0) specular 0.5 came out 0.23
 // and roughness 0.6 came out 0.54; each Stack observation matched the core BRDF evaluated with the
 // true normal, light and view to 0.05 %, so the loss was the Lambertian normals' ~1 deg lean.
 #include <gtest/gtest.h>
