@@ -64,10 +64,10 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
 // (IntegrateSide's integrator, also for near lights, whose height came from the refinement rounds).
 // Photometric stereo's Lambertian normals lean toward a glossy fabric's highlights; the written
 // normal map, the height and the residual map then all belong with the fitted parameters
-// (docs/fitting.md, "Normal refinement").
-void AdoptFittedNormals(const fitting::FitResult& fit, const MetricGrid& grid, bool near, const StageOptions& options,
-                        SideReconstruction* side, RunReport* report,
-                        const ProgressCallback& progress = {});
+// (docs/fitting.md, "Normal refinement"). The normals are moved out of `fit` (one full-size copy,
+// not two: 12 bytes a pixel); returns true when they were adopted.
+bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
+                        SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
 
 // Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
 // over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
