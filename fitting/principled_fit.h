@@ -13,7 +13,9 @@
 //                     start, then Ceres (Levenberg-Marquardt, bounds [0, 1]); clusters in parallel;
 //   4. observability: parameters the capture does not constrain are left out (U3M default, no
 //                     texture) and the cluster refitted without them (fitting/observability.h);
-//   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
+//   5. per pixel:     every pixel's normal is refined with the full model at its cluster's
+//                     parameters (FitResult::normals), then it gets its closed-form base colour;
+//                     where its own highlights carry
 //                     enough information, roughness (optionally specular) is refined by a damped
 //                     Gauss-Newton step regularised toward the cluster value. No Ceres problem per
 //                     pixel, no allocation per pixel.
