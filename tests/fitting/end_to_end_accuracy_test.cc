@@ -90,11 +90,11 @@ class EndToEndAccuracy : public ::testing::TestWithParam<const char*> {
 
 // The data side: every Stack observation equals the core BRDF with the true normal, parameters,
 // light and view (the grid and the scene share pixel centres and pitch). Distant rig only: on the
-// near rig every light's observations are 1.47 % darker than the model (RMS 1.8 %), an offset
-// between the synthetic scanner's point lights and the Stack's irradiance that the fit cannot
-// remove (it lands in the base colour; docs/fitting.md). Not fixed here (upstream of the fit).
+// near rig every light's observations are 1.47 % darker than the model (RMS 1.8 %): that rig's
+// camera vignettes (polynomial, -12 % r^2 of the half diagonal) and without flat frames nothing
+// corrects it; the fit puts it into the base colour (docs/fitting.md). Upstream of the fit.
 TEST_P(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
-  if (std::string(GetParam()) == "near") GTEST_SKIP() << "near rig: known 1.5 % irradiance offset, see above";
+  if (std::string(GetParam()) == "near") GTEST_SKIP() << "near rig: uncorrected camera vignetting without flat frames, see above";
   ASSERT_EQ(stack_.grid.width, kScenePixels);
   PrincipledParams<double> truth;
   truth.base_color = Vec3<double>(0.6, 0.4, 0.3);
