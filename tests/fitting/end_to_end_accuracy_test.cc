@@ -90,8 +90,8 @@ class EndToEndAccuracy : public ::testing::TestWithParam<const char*> {
 
 // The data side: every Stack observation equals the core BRDF with the true normal, parameters,
 // light and view (the grid and the scene share pixel centres and pitch). Distant rig only: on the
-// near rig every light's observations are 1.47 % darker than the model (RMS 1.8 %): that rig's
-// camera vignettes (polynomial, -12 % r^2 of the half diagonal) and without flat frames nothing
+// near rig every light's observations are 1.47 % darker than the model (RMS 1.8 %), consistent
+// with that rig's camera vignetting (polynomial, -12 % r^2 of the half diagonal) and without flat frames nothing
 // corrects it; the fit puts it into the base colour (docs/fitting.md). Upstream of the fit.
 TEST_P(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
   if (std::string(GetParam()) == "near") GTEST_SKIP() << "near rig: uncorrected camera vignetting without flat frames, see above";

@@ -119,8 +119,8 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
   // Not asserted on the near rig: there the Stack itself is 1.5 % darker than the core BRDF with
   // the true normal, light and view (EndToEndAccuracy data check: mean relative error -1.47 %,
   // RMS 1.8 %, the same for every light), so the base colour comes out 2-3 % low and the
-  // re-render 2.5 % off although normals, roughness and specular are within their targets. The
-  // near rig's camera vignettes (polynomial, -12 % r^2 + 2 % r^4 of the half diagonal) and without
+  // re-render 2.5 % off although normals, roughness and specular are within their targets,
+  // consistent with the near rig's camera vignetting (polynomial, -12 % r^2 + 2 % r^4 of the half diagonal) and without
   // flat frames nothing corrects it; with the calibration frames the near chain is worse elsewhere
   // (measured: height 8.2 % of the range, roughness error 0.23, specular left out), a calibration
   // matter upstream of the fit (docs/fitting.md, "Through the whole pipeline").
