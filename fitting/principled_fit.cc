@@ -69,6 +69,9 @@ constexpr double kPixelStep = 1e-4;
 constexpr double kNormalStep = 1e-4;
 constexpr double kNormalDamping = 1e-3;
 constexpr double kNormalConvergedTilt = 1e-5;
+// Hidden-lobe rule (FitClusterModel): roughness at or below sqrt(kMinAlpha) = 0.032, GGX's alpha
+// clamp, is the fit's lower bound (the lobe cannot get narrower).
+constexpr double kHiddenLobeRoughness = 0.032;
 // Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
 constexpr double kMetallicStart = 0.7;
 // Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
@@ -211,7 +214,8 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
 // field). Returns the refined unit normal, or the reconstruction's if no step lowers the cost.
 // `buffer` is scratch space of n_obs entries; `residuals` grows to 15 n_obs once per worker.
 Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
-                             const PixelCostSettings& settings, LocalObservation* buffer, std::vector<double>& residuals) {
+                             const PixelCostSettings& settings, int iterations, LocalObservation* buffer,
+                             std::vector<double>& residuals) {
   const FitOptions& options = *context.options;
   Eigen::Vector3d n0 = GeometryNormal(context, index);
   const double length = n0.norm();
@@ -241,7 +245,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   double cost = 0.0;
   if (!eval(tilt, r, &cost)) return n0;
   const double max_tilt = std::tan(options.normal_max_change_deg * M_PI / 180.0);
-  for (int iteration = 0; iteration < options.normal_iterations; ++iteration) {
+  for (int iteration = 0; iteration < iterations; ++iteration) {
     // Jacobian columns in jac0, jac1 (no allocation: all in `residuals`).
     bool ok = true;
     for (int j = 0; j < 2 && ok; ++j) {
@@ -876,10 +880,32 @@ bool FitOptions::Check() const {
          noise_relative >= 0.0 && noise_floor >= 0.0 && noise_relative + noise_floor > 0.0 && robust_loss.scale > 0.0 &&
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
          mismatch_relative_rms > 0.0 && unusable_relative_rms >= mismatch_relative_rms && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
-         pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0 && normal_refinement_passes >= 0 && normal_iterations >= 1 &&
+         pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0 && normal_refinement_max_passes >= 0 && normal_refinement_tolerance_deg >= 0.0 &&
+         normal_iterations >= 1 && pixel_normal_iterations >= 1 &&
          normal_max_change_deg > 0.0 && normal_max_change_deg < 90.0 && min_highlight_share >= 0.0 &&
          min_highlight_share <= 1.0 && highlight_lobe_fraction > 0.0 && highlight_lobe_fraction < 1.0 &&
          unreliable_pixel_share >= 0.0 && unreliable_pixel_share < 1.0;
+}
+
+std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector<ClusterFit>* clusters) {
+  std::vector<int> left_out;
+  if (capture_saturated) return left_out;
+  for (ClusterFit& c : *clusters) {
+    ParameterEstimate& roughness = c.parameters[kRoughness];
+    const ParameterEstimate& specular = c.parameters[kSpecular];
+    if (!roughness.measured || roughness.value > kHiddenLobeRoughness || specular.measured) continue;
+    char buffer[360];
+    std::snprintf(buffer, sizeof buffer,
+                  "the fit ended at the lower bound (roughness %.3g <= %.3g) with specular held at its default and no "
+                  "saturated highlight in the capture: a lobe that narrow falls between the lights, so the solve hid "
+                  "the held specular lobe instead of measuring a roughness",
+                  roughness.value, kHiddenLobeRoughness);
+    roughness.measured = false;
+    roughness.std_dev = std::numeric_limits<double>::infinity();
+    roughness.reason = buffer;
+    left_out.push_back(c.id);
+  }
+  return left_out;
 }
 
 // Per-observation constants of `stack` with the given noise levels (MedianLuminance of the stack
@@ -988,9 +1014,17 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       }
       const double saturated_share = seen > 0 ? static_cast<double>(saturated) / static_cast<double>(seen) : 0.0;
       // Normal refinement: the sampled pixels' normals refitted with the full model at the
-      // cluster's parameters, then the cluster refitted on them (see RefineNormal).
+      // cluster's parameters, then the cluster refitted on them (see RefineNormal); passes until
+      // the normals stop moving (mean change below normal_refinement_tolerance_deg).
       std::vector<double> scratch;
-      for (int pass = 0; pass < options.normal_refinement_passes && s.pixels() > 0; ++pass) {
+      std::vector<Eigen::Vector3d> previous(take, Eigen::Vector3d::Zero());
+      for (std::size_t j = 0; j < take; ++j) {
+        const Eigen::Vector3d n = GeometryNormal(context, m[j * m.size() / take]);
+        if (n.norm() > kMinNormalLength && n.norm() < kMaxNormalLength) previous[j] = n.normalized();
+      }
+      int passes = 0;
+      double change_deg = 0.0;
+      for (int pass = 0; pass < options.normal_refinement_max_passes && s.pixels() > 0; ++pass) {
         ParameterVector params;
         ParameterMask free{};
         for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1000,12 +1034,18 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         }
         ClusterSamples refined;
         refined.offsets.push_back(0);
+        double change_sum = 0.0;
+        int changed = 0;
         for (std::size_t j = 0; j < take; ++j) {
           const std::size_t index = m[j * m.size() / take];
           if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
           const PixelCostSettings settings =
               Settings(options, params, free, std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color)));
-          const Eigen::Vector3d n = RefineNormal(context, index, params, settings, buffer.data(), scratch);
+          const Eigen::Vector3d n =
+              RefineNormal(context, index, params, settings, options.normal_iterations, buffer.data(), scratch);
+          change_sum += std::atan2(n.cross(previous[j]).norm(), n.dot(previous[j])) * 180.0 / M_PI;
+          ++changed;
+          previous[j] = n;
           const int count = GatherPixelWithNormal(context, index, n, buffer.data(), nullptr);
           if (count < options.min_observations) continue;
           refined.observations.insert(refined.observations.end(), buffer.begin(), buffer.begin() + count);
@@ -1016,7 +1056,12 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         double pass_observability_s = 0.0;
         model.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
         observability_s[c] += pass_observability_s;
+        ++passes;
+        change_deg = changed > 0 ? change_sum / changed : 0.0;
+        if (change_deg < options.normal_refinement_tolerance_deg) break;
       }
+      model.clusters[c].normal_passes = passes;
+      model.clusters[c].normal_change_deg = change_deg;
       model.clusters[c].saturated_share = saturated_share;
       std::lock_guard lock(progress_mutex);
       ReportProgress(progress, "fit: clusters", static_cast<double>(++done) / k);
@@ -1059,6 +1104,17 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       e.std_dev = std::numeric_limits<double>::infinity();
       e.reason = buffer;
     }
+  }
+
+  // Hidden lobe (docs/fitting.md, LeaveOutHiddenLobeRoughness): only a capture with saturated
+  // highlights can measure a lobe at the lower bound.
+  std::size_t capture_saturated = 0;
+  for (const Observation& o : stack.observations) {
+    for (std::uint8_t f : o.flags) capture_saturated += (f & kSaturated) != 0 ? 1 : 0;
+  }
+  for (int id : LeaveOutHiddenLobeRoughness(capture_saturated > 0, &model.clusters)) {
+    LogWarning() << "fitting: cluster " << id << ": roughness "
+                 << model.clusters[id].parameters[kRoughness].reason;
   }
 
   // Reliability of what the clusters measured (FitOptions, "Reliability"): evidence that the value
@@ -1115,6 +1171,7 @@ FitResult StartPixelMaps(const ClusterModel& model, const MetricGrid& grid) {
   result.times = model.times;
   result.base_color = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   result.cluster_id = Image(grid.width, grid.height, 1, -1.0f, grid.pitch_mm);
+  if (model.options.refine_pixel_normals) result.normals = Image(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   for (int i = 0; i < kFitParameterCount; ++i) {
     if (!model.measured_any[i]) continue;  // left out: no image at all (memory at 36 MP)
     result.parameter_maps[i] =
@@ -1172,10 +1229,16 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
     std::int64_t local_fitted = 0, local_refined = 0;
     ParameterVector local_variance_delta{};
     float feature[kAppearanceFeatureCount];
+    std::vector<double> normal_scratch;  // RefineNormal's residuals, grown once per chunk
+    const bool refine_normals = !result.normals.empty();
     for (std::size_t row = row_begin; row < row_end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
         const std::size_t index = row * grid.width + col;
-        const int count = PixelFeatures(context, index, buffers, feature);
+        int count = PixelFeatures(context, index, buffers, feature);
+        if (refine_normals) {  // the reconstruction's normal unless refined below
+          const Eigen::Vector3d n = GeometryNormal(context, index);
+          for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
+        }
         if (count < options.min_observations) {
           if (!geometry.albedo.empty()) {
             for (int ch = 0; ch < 3; ++ch) {
@@ -1187,6 +1250,17 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
         const int c = NearestCluster(clustering, feature, kAppearanceFeatureCount, options.clustering);
         ++local_pixels[c];
         ++local_fitted;
+        if (refine_normals) {
+          // The pixel's normal with the full model at its cluster's parameters (as the cluster
+          // samples' in FitClusterModel), then its colour and own parameters on that normal.
+          const PixelCostSettings settings = Settings(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]);
+          const Eigen::Vector3d n = RefineNormal(context, index, cluster_params[c], settings,
+                                                 options.pixel_normal_iterations, buffers.observations.data(),
+                                                 normal_scratch);
+          // RefineNormal keeps the set of usable observations, so the count is unchanged.
+          count = GatherPixelWithNormal(context, index, n, buffers.observations.data(), nullptr);
+          for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
+        }
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
         ParameterVector params = cluster_params[c];
         Eigen::Vector3d color;
@@ -1436,7 +1510,8 @@ std::string FitResultToJson(const FitResult& result) {
     const ClusterFit& f = result.clusters[c];
     j << (c ? "," : "") << "\n    {\"id\": " << f.id << ", \"pixels\": " << f.pixel_count
       << ", \"samples\": " << f.sample_count << ", \"converged\": " << (f.converged ? "true" : "false")
-      << ", \"iterations\": " << f.iterations << ", \"initial_cost\": " << JsonNumber(f.initial_cost)
+      << ", \"iterations\": " << f.iterations << ", \"normal_passes\": " << f.normal_passes
+      << ", \"normal_change_deg\": " << JsonNumber(f.normal_change_deg) << ", \"initial_cost\": " << JsonNumber(f.initial_cost)
       << ", \"final_cost\": " << JsonNumber(f.final_cost)
       << ", \"rms_relative_residual\": " << JsonNumber(f.rms_relative_residual)
       << ", \"saturated_share\": " << JsonNumber(f.saturated_share)

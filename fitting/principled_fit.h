@@ -13,7 +13,9 @@
 //                     start, then Ceres (Levenberg-Marquardt, bounds [0, 1]); clusters in parallel;
 //   4. observability: parameters the capture does not constrain are left out (U3M default, no
 //                     texture) and the cluster refitted without them (fitting/observability.h);
-//   5. per pixel:     every pixel gets its closed-form base colour; where its own highlights carry
+//   5. per pixel:     every pixel's normal is refined with the full model at its cluster's
+//                     parameters (FitResult::normals), then it gets its closed-form base colour;
+//                     where its own highlights carry
 //                     enough information, roughness (optionally specular) is refined by a damped
 //                     Gauss-Newton step regularised toward the cluster value. No Ceres problem per
 //                     pixel, no allocation per pixel.
@@ -116,10 +118,19 @@ struct FitOptions {
   // normals lean toward the highlights; each pass refits every sampled pixel's normal with the full
   // model at the cluster's parameters (damped Gauss-Newton, at most normal_iterations steps, never
   // more than normal_max_change_deg from the reconstruction's normal), then refits the cluster.
-  // 0 passes: the reconstruction's normals as they are.
-  int normal_refinement_passes = 2;
+  // Passes run to convergence: they stop when the mean angle between a pass's normals and the
+  // previous pass's (the reconstruction's for the first) is below normal_refinement_tolerance_deg,
+  // or after normal_refinement_max_passes. A fixed 2 passes stopped short on the smooth bump field
+  // (specular 0.37-0.43 for 0.5; converged 0.49-0.50). 0 passes: the reconstruction's normals.
+  int normal_refinement_max_passes = 8;
+  double normal_refinement_tolerance_deg = 0.01;
   int normal_iterations = 5;
   double normal_max_change_deg = 10.0;
+  // Every pixel's normal refined the same way after the fit, at its own fitted parameters
+  // (FitResult::normals; the pipeline writes those and integrates the height from them), with at
+  // most pixel_normal_iterations damped Gauss-Newton steps. Off: FitResult::normals stays empty.
+  bool refine_pixel_normals = true;
+  int pixel_normal_iterations = 3;
   // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
 
   bool Check() const;
@@ -152,6 +163,10 @@ struct ClusterFit {
   double saturated_share = 0.0;
   double highlight_share = 0.0;
   int iterations = 0;
+  // Normal refinement of the samples: passes run, and the mean normal change (deg) of the last one
+  // (below FitOptions::normal_refinement_tolerance_deg when it converged).
+  int normal_passes = 0;
+  double normal_change_deg = 0.0;
   bool converged = false;
   std::string message;               // Ceres termination / failure text
 };
@@ -197,6 +212,12 @@ struct FitResult {
   Image base_color;
   std::array<Image, kFitParameterCount> parameter_maps;  // index = FitParameter
   Image cluster_id;  // 1 channel, cluster index, -1 for pixels without enough observations
+  // 3 channels, unit, world frame: every fitted pixel's normal refined with the full model at its
+  // cluster's parameters (FitOptions::refine_pixel_normals), the reconstruction's elsewhere; empty
+  // when the option is off. Photometric stereo's Lambertian normals lean toward the highlights of a
+  // glossy fabric; these are the normals the fitted maps belong with (write them, integrate the
+  // height from them, render with them).
+  Image normals;
   std::array<MapReport, kFitParameterCount> maps;
   std::vector<ClusterFit> clusters;
   ConvergenceReport convergence;
@@ -221,6 +242,14 @@ struct SurfaceGeometry {
 // `convergence`.
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
                         const ProgressCallback& progress = {});
+
+// Hidden-lobe rule (docs/fitting.md), applied by FitPrincipled / FitClusterModel after the cluster
+// fits: a cluster whose roughness ended at the fit's lower bound (<= 0.032, GGX's alpha clamp)
+// while specular was left out (held at its U3M default 0.5) hid the held lobe by shrinking it to a
+// spike between the lights; unless the capture has saturated highlights (which can pin such a
+// spike, the mirror-like case), that roughness is no measurement and is left out with the reason.
+// Returns the ids of the clusters changed.
+std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector<ClusterFit>* clusters);
 
 // Renders observation `observation_index` of `stack` (its light, view, irradiance and grid; its rgb
 // is ignored) with the fitted maps, for held-out checks: 3-channel linear RGB in the Stack's units.

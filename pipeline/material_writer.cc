@@ -99,7 +99,7 @@ SideBuild BuildSide(const SideMaps& maps, const fs::path& staging, const Uniform
     WriteTextureMap(maps.normal, MapKind::kNormal, staging / path, kDataFormat);
     v.normal = NormalParam{true, mean_normal, NormalTexture{1.0, TextureImageFor(maps.normal, path)}};
     result->files.push_back(path);
-    record("normal", ParameterSource::kMeasured, mean_normal.z, "photometric stereo");
+    record("normal", ParameterSource::kMeasured, mean_normal.z, maps.normal_source);
   }
 
   // Displacement: 0..1 over the height range; the mm scale goes into our custom section.

@@ -35,6 +35,7 @@ struct SideMaps {
   std::string side = "front";   // "front" or "back"
   Image base_color;              // 3 channels, linear RGB 0..1
   Image normal;                  // 3 channels, unit, world frame (x right, y up, z out of the fabric)
+  std::string normal_source = "photometric stereo";  // the report's reason for a normal texture
   Image height_mm;               // 1 channel, mm, +z toward a camera above the sample
   Image alpha;                   // 1 channel 0..1; empty: the sample has no holes
   std::string height_unreliable_reason;  // non-empty: displacement written, flagged unreliable

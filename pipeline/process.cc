@@ -241,12 +241,16 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     Stack stack;  // the whole stack (untiled), or the fit's sample (tiled): thumbnails
     SideReconstruction reconstruction;
     fitting::FitResult fit;
+    bool fitted_normals = false;  // the written normals are the fit's (AdoptFittedNormals)
     Image residual;
     double residual_mean = 0.0;
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       reconstruction = ReconstructSide(&stack, stages, alpha, &report, progress);
       fit = FitSide(stack, reconstruction, stages, &report, progress);
+      const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
+                                    [](const LightModel& l) { return l.type == LightType::kPoint; });
+      fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
     } else {
       TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations, &report, progress);
@@ -255,6 +259,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       fit = std::move(tiled.fit);
       residual = std::move(tiled.residual);
       residual_mean = tiled.residual_mean;
+      fitted_normals = tiled.fitted_normals;
     }
     report.options["tiles_" + side] = {{"bands", plan.bands}, {"band_rows", plan.band_rows},
                                        {"fit_sample_step", plan.sample_step},
@@ -266,6 +271,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.base_color = fit.base_color.empty() ? reconstruction.photometric_stereo.albedo : fit.base_color;
     maps.base_color.set_pitch_mm(grid.pitch_mm);
     maps.normal = reconstruction.photometric_stereo.normal;
+    if (fitted_normals) maps.normal_source = "photometric stereo, refined with the fitted model (height integrated from these)";
     maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;

@@ -258,6 +258,24 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
   return fit;
 }
 
+bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
+                        SideReconstruction* side, RunReport* report, const ProgressCallback& progress) {
+  if (fit->normals.empty()) return false;
+  const double start = StageClock();
+  side->photometric_stereo.normal = std::move(fit->normals);
+  fit->normals = Image();
+  side->photometric_stereo.normal.set_pitch_mm(grid.pitch_mm);
+  reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
+  integration.pitch_mm = grid.pitch_mm;
+  side->height_mm = reconstruction::IntegrateNormals(side->photometric_stereo.normal, side->valid, integration, progress)
+                        .height_mm;
+  side->height_mm.set_pitch_mm(grid.pitch_mm);
+  report->steps.push_back({"integration of the fitted normals (" + reconstruction::IntegratorName(integration.method) + ")",
+                           true, "normals refined with the fitted model; height integrated again",
+                           StageClock() - start});
+  return true;
+}
+
 Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                      int max_observations, double* mean_out, std::size_t* pixels_out) {
   const int w = stack.grid.width, h = stack.grid.height;

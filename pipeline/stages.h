@@ -66,6 +66,16 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
 // The report's "cast shadows" step: off, or the share marked and the marking time (seconds).
 StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds);
 
+// After the fit: the fit's refined normals (FitResult::normals; nothing happens when it is empty)
+// replace the photometric-stereo normals in `side`, and the height is integrated again from them
+// (IntegrateSide's integrator, also for near lights, whose height came from the refinement rounds).
+// Photometric stereo's Lambertian normals lean toward a glossy fabric's highlights; the written
+// normal map, the height and the residual map then all belong with the fitted parameters
+// (docs/fitting.md, "Normal refinement"). The normals are moved out of `fit` (one full-size copy,
+// not two: 12 bytes a pixel); returns true when they were adopted.
+bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
+                        SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
+
 // Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
 // over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
 // observation is usable). `mean_out` receives the mean over usable pixels.

@@ -332,6 +332,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
   out.fit.times.total_s = StageClock() - start;
+  // The per-pixel step refined every pixel's normal band by band into the full-size map; the whole
+  // normal map is in memory already, so the height is integrated again as in the untiled path.
+  out.fitted_normals = AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress);
   std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on every " + std::to_string(step) +
                        "th row and column, pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() - build_before_fit) + " s included)";

@@ -32,6 +32,7 @@ struct TiledSide {
   fitting::FitResult fit;             // full-size maps
   Image residual;                     // FitResidualMap over the whole grid
   double residual_mean = 0.0;
+  bool fitted_normals = false;        // reconstruction's normals are the fit's (AdoptFittedNormals)
   Stack sample;                       // the fit's sample of the side's stack (thumbnails)
 };
 

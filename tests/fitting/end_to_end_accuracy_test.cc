@@ -1,9 +1,10 @@
 // End-to-end accuracy of the fit (issue 6 targets) on a tiny noise-free synthetic capture: the
-// bump field of tests/support/bump_scene.h on the `distant` rig, written by the synthetic scanner,
-// calibrated, rectified, reconstructed (photometric stereo) and fitted by the pipeline's stages.
+// bump field of tests/support/bump_scene.h on the `distant` and `near` rigs, written by the
+// synthetic scanner, calibrated, rectified, reconstructed (photometric stereo) and fitted by the
+// pipeline's stages at the default preset.
 //
 // Regression test of the normal refinement in FitPrincipled (docs/fitting.md): with the
-// photometric-stereo normals as they are (normal_refinement_passes = 0) specular 0.5 came out 0.23
+// photometric-stereo normals as they are (normal_refinement_max_passes = 0) specular 0.5 came out 0.23
 // and roughness 0.6 came out 0.54; each Stack observation matched the core BRDF evaluated with the
 // true normal, light and view to 0.05 %, so the loss was the Lambertian normals' ~1 deg lean.
 #include <gtest/gtest.h>
@@ -13,6 +14,8 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -38,21 +41,23 @@ constexpr double kTruthSpecular = 0.5;
 // Issue 6 accuracy targets.
 constexpr double kRoughnessTarget = 0.05;
 constexpr double kSpecularTarget = 0.1;
+constexpr double kRerenderTarget = 0.02;  // relative RMSE of a re-render under lights left out of the fit
+constexpr int kHeldOutEvery = 4;          // every 4th light (4 of 16) is left out of reconstruction and fit
 // The synthetic frames against the core BRDF with the true normal (rectification, irradiance,
 // light and view vectors): mean relative error of an observation over the inner pixels.
 constexpr double kDataModelTolerance = 0.005;
 constexpr int kBorderPixels = 4;  // rectification's edge pixels are left out of the data check
 
-class EndToEndAccuracy : public ::testing::Test {
+class EndToEndAccuracy : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() / ("u3mscan_accuracy_" + std::to_string(::getpid()));
+    root_ = fs::temp_directory_path() / ("u3mscan_accuracy_" + std::string(GetParam()) + "_" + std::to_string(::getpid()));
     fs::remove_all(root_);
     scene_ = testing::BumpScene(kScenePixels, kScenePixels, kPitchMm, kBumpAmplitudeMm, kBumpPeriodMm);
     synthetic::RigOptions rig_options;
     rig_options.width = kCameraPixels;
     rig_options.height = kCameraPixels;
-    rig_ = synthetic::MakeRig("distant", rig_options);
+    rig_ = synthetic::MakeRig(GetParam(), rig_options);
     // Noise-free sensor: no read noise, no fixed pattern, shot noise negligible.
     rig_.sensor.read_noise_e = 0.0;
     rig_.sensor.fixed_pattern_dn = 0.0;
@@ -61,7 +66,7 @@ class EndToEndAccuracy : public ::testing::Test {
     capture_options.format = synthetic::FrameFormat::kTiff;
     capture_options.calibration_frames = false;
     synthetic::WriteSyntheticCapture(scene_, rig_, capture_options, root_ / "synthetic");
-    options_ = OptionsForPreset(Preset::kFast);
+    options_ = OptionsForPreset(Preset::kBalanced);  // the default preset
     prepared_ = std::make_unique<PreparedCapture>(
         PrepareCapture(root_ / "synthetic" / synthetic::kCaptureSubdir, options_, &report_));
     stack_ = BuildSideStack(*prepared_, "front", options_, &report_);
@@ -84,8 +89,12 @@ class EndToEndAccuracy : public ::testing::Test {
 };
 
 // The data side: every Stack observation equals the core BRDF with the true normal, parameters,
-// light and view (the grid and the scene share pixel centres and pitch).
-TEST_F(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
+// light and view (the grid and the scene share pixel centres and pitch). Distant rig only: on the
+// near rig every light's observations are 1.47 % darker than the model (RMS 1.8 %), consistent
+// with that rig's camera vignetting (polynomial, -12 % r^2 of the half diagonal) and without flat frames nothing
+// corrects it; the fit puts it into the base colour (docs/fitting.md). Upstream of the fit.
+TEST_P(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
+  if (std::string(GetParam()) == "near") GTEST_SKIP() << "near rig: uncorrected camera vignetting without flat frames, see above";
   ASSERT_EQ(stack_.grid.width, kScenePixels);
   PrincipledParams<double> truth;
   truth.base_color = Vec3<double>(0.6, 0.4, 0.3);
@@ -94,7 +103,7 @@ TEST_F(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
   for (const Observation& o : stack_.observations) {
     const LightModel& light = stack_.lights[o.light];
     const Eigen::Vector3d camera = stack_.views[o.view].centre_in_world_mm;
-    double sum = 0.0;
+    double sum = 0.0, sum2 = 0.0;
     int count = 0;
     for (int row = kBorderPixels; row < kScenePixels - kBorderPixels; ++row) {
       for (int col = kBorderPixels; col < kScenePixels - kBorderPixels; ++col) {
@@ -108,16 +117,18 @@ TEST_F(EndToEndAccuracy, StackMatchesTheBrdfWithTrueGeometry) {
         for (int c = 0; c < 3; ++c) {
           const double model = EvaluatePrincipled(truth, l, v)(c) * l.z() * e;
           sum += o.rgb.at(c, row, col) / model - 1.0;
+          sum2 += (o.rgb.at(c, row, col) / model - 1.0) * (o.rgb.at(c, row, col) / model - 1.0);
           ++count;
         }
       }
     }
+    std::cout << "[ MEASURED ] light " << light.id << " mean relative error " << sum / count << " rms " << std::sqrt(sum2 / count) << "\n";
     EXPECT_LT(std::abs(sum / count), kDataModelTolerance) << "light " << light.id;
   }
 }
 
 // The fit side: specular and roughness within the issue-6 targets through the whole chain.
-TEST_F(EndToEndAccuracy, SpecularAndRoughnessWithinIssue6Targets) {
+TEST_P(EndToEndAccuracy, SpecularAndRoughnessWithinIssue6Targets) {
   const fitting::FitResult fit = Fit(options_);
   const auto& roughness = fit.report(fitting::FitParameter::kRoughness);
   const auto& specular = fit.report(fitting::FitParameter::kSpecular);
@@ -129,17 +140,55 @@ TEST_F(EndToEndAccuracy, SpecularAndRoughnessWithinIssue6Targets) {
   EXPECT_NEAR(specular.value, kTruthSpecular, kSpecularTarget);
 }
 
+// Lights left out of reconstruction and fit, re-rendered from the fitted maps with the fit's
+// refined normals and the height integrated from them (what `process` writes), against their data.
+TEST_P(EndToEndAccuracy, LeftOutLightsReRenderWithinIssue6Target) {
+  Stack fitted = stack_;
+  fitted.observations.clear();
+  std::vector<Observation> held_out;
+  for (std::size_t k = 0; k < stack_.observations.size(); ++k) {
+    (k % kHeldOutEvery == 1 ? held_out : fitted.observations).push_back(stack_.observations[k]);
+  }
+  const Image alpha(fitted.grid.width, fitted.grid.height, 1, 1.0f, fitted.grid.pitch_mm);
+  SideReconstruction geometry = ReconstructSide(&fitted, options_, alpha, &report_);
+  fitting::FitResult fit = FitSide(fitted, geometry, options_, &report_);
+  const bool near = std::string(GetParam()) == "near";
+  ASSERT_TRUE(AdoptFittedNormals(&fit, fitted.grid, near, options_, &geometry, &report_));
+  const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                         geometry.height_mm};
+  double num = 0.0, den = 0.0;
+  for (const Observation& o : held_out) {
+    const Image render = fitting::RenderFitted(fit, fitted, surface, o);
+    for (int row = kBorderPixels; row < kScenePixels - kBorderPixels; ++row) {
+      for (int col = kBorderPixels; col < kScenePixels - kBorderPixels; ++col) {
+        if (!o.flags.empty() && o.flags[static_cast<std::size_t>(row) * kScenePixels + col] != 0) continue;
+        for (int c = 0; c < 3; ++c) {
+          const double d = o.rgb.at(c, row, col), r = render.at(c, row, col);
+          num += (r - d) * (r - d);
+          den += d * d;
+        }
+      }
+    }
+  }
+  ASSERT_GT(den, 0.0);
+  const double rmse = std::sqrt(num / den);
+  std::cout << "[ MEASURED ] " << GetParam() << ": left-out lights re-render relative RMSE " << 100.0 * rmse << " %\n";
+  EXPECT_LT(rmse, kRerenderTarget);
+}
+
 // Without the normal refinement the Lambertian normals bias specular low: the refinement is what
 // brings it within the target (guards against the refinement being silently disabled or broken).
-TEST_F(EndToEndAccuracy, NormalRefinementRemovesTheSpecularBias) {
+TEST_P(EndToEndAccuracy, NormalRefinementRemovesTheSpecularBias) {
   StageOptions without = options_;
-  without.fit.normal_refinement_passes = 0;
+  without.fit.normal_refinement_max_passes = 0;
   const double biased = Fit(without).report(fitting::FitParameter::kSpecular).value;
   const double refined = Fit(options_).report(fitting::FitParameter::kSpecular).value;
   std::cout << "[ MEASURED ] specular without normal refinement " << biased << ", with " << refined << "\n";
   EXPECT_GT(std::abs(biased - kTruthSpecular), kSpecularTarget);
   EXPECT_LT(std::abs(refined - kTruthSpecular), std::abs(biased - kTruthSpecular));
 }
+
+INSTANTIATE_TEST_SUITE_P(Rigs, EndToEndAccuracy, ::testing::Values("distant", "near"));
 
 }  // namespace
 }  // namespace u3mscan
