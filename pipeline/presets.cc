@@ -34,6 +34,7 @@ StageOptions OptionsForPreset(Preset preset) {
       options.fit.grid_samples_per_cluster = 24;
       options.fit.max_iterations = 30;
       options.fit.mode = fitting::FitMode::kClusters;
+      options.fit.normal_refinement_max_passes = 3;
       break;
     case Preset::kBalanced:
       options.photometric_stereo.solver = PsSolver::kRobust;
@@ -49,6 +50,7 @@ StageOptions OptionsForPreset(Preset preset) {
       options.fit.samples_per_cluster = 384;
       options.fit.grid_samples_per_cluster = 96;
       options.fit.pixel_iterations = 6;
+      options.fit.normal_refinement_tolerance_deg = 0.01;
       break;
   }
   return options;
