@@ -45,17 +45,6 @@ class HeightField {
   int w_, rows_;
 };
 
-double MeanAngleDeg(const Image& a, const Image& b) {
-  const std::size_t n = a.pixel_count();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
-    const Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
-    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
-  }
-  return n > 0 ? sum / static_cast<double>(n) * 180.0 / std::numbers::pi : 0.0;
-}
-
 double Seconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
@@ -219,7 +208,7 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
     const CastShadowCounts counts = MarkCastShadows(height, stack, shadow_options);
     out.mark_seconds += Seconds() - start;
     PhotometricStereoResult next = SolvePhotometricStereoAt(*stack, again, height);
-    const double change = MeanAngleDeg(next.normal, result.normal);
+    const double change = MeanNormalAngleDeg(next.normal, result.normal);
     if (change >= previous_change) {
       LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
                    << " deg after " << previous_change << " deg); kept round " << it - 1;

@@ -654,18 +654,6 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   return res;
 }
 
-double MeanAngleDeg(const Image& a, const Image& b) {
-  const std::size_t n = a.pixel_count();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    // atan2(|a x b|, a . b): exact for tiny angles, where acos of a float dot product is not.
-    const Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
-    const Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
-    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
-  }
-  return n > 0 ? sum / n * 180.0 / std::numbers::pi : 0.0;
-}
-
 // kBurley: the diffuse roughness that leaves the least residual, over a sample of at most
 // ~kRoughnessSamplePixels pixels at height `height_mm`: a grid over [0, 1], then a parabola
 // through the best grid point and its neighbours; -1 (Lambert's law) when that fits better still
@@ -766,7 +754,7 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
       // Confidence as integration weights: unreliable normals do not bend the height.
       Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
       PhotometricStereoResult next = SolveAt(solver, stack, options, height);
-      const double change = MeanAngleDeg(next.normal, result.normal);
+      const double change = MeanNormalAngleDeg(next.normal, result.normal);
       if (change >= previous_change) {
         // Not converging (normals too unreliable to place the surface): keep the last round,
         // whose change was the smallest.
@@ -811,6 +799,18 @@ double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions
   Solver solver(stack, options);
   SetDiffuseRoughness(solver, stack, options);
   return solver.burley() ? solver.roughness() : -1.0;
+}
+
+double MeanNormalAngleDeg(const Image& a, const Image& b) {
+  const std::size_t n = a.pixel_count();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    // atan2(|a x b|, a . b): exact for tiny angles, where acos of a float dot product is not.
+    const Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
+    const Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
+    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
+  }
+  return n > 0 ? sum / n * 180.0 / std::numbers::pi : 0.0;
 }
 
 }  // namespace u3mscan::reconstruction

@@ -151,4 +151,8 @@ double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions
 PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
                                                  const Image& height_mm);
 
+// Mean angle (degrees) between two normal maps of the same size (3 channels), over every pixel:
+// how far a refinement round moved the normals.
+double MeanNormalAngleDeg(const Image& a, const Image& b);
+
 }  // namespace u3mscan::reconstruction
