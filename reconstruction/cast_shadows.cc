@@ -199,31 +199,18 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
     return result;
   }
 
-  // Near point lights: RunPhotometricStereo's refinement, marks renewed after each integration.
-  double previous_change = std::numeric_limits<double>::infinity();
-  for (int it = 1; it <= options.max_near_iterations; ++it) {
-    ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
-    Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
-    const double start = Seconds();
-    const CastShadowCounts counts = MarkCastShadows(height, stack, shadow_options);
-    out.mark_seconds += Seconds() - start;
-    PhotometricStereoResult next = SolvePhotometricStereoAt(*stack, again, height);
-    const double change = MeanNormalAngleDeg(next.normal, result.normal);
-    if (change >= previous_change) {
-      LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
-                   << " deg after " << previous_change << " deg); kept round " << it - 1;
-      // The stack's marks must be those the kept result was solved with.
-      out.counts = MarkCastShadows(result.height_mm, stack, shadow_options);
-      break;
-    }
-    previous_change = change;
-    result = std::move(next);
-    result.height_mm = std::move(height);
-    result.near_iterations = it;
-    result.last_normal_change_deg = change;
-    out.counts = counts;
-    if (change < options.near_tolerance_deg) break;
-  }
+  // Near point lights: RunPhotometricStereo's refinement, marks renewed after each integration
+  // (and for the kept round's height when a round is rejected, so the stack's marks are the ones
+  // the result was solved with).
+  result = RefineNearLightHeights(
+      std::move(result), options, stack->grid.pitch_mm,
+      [&](const Image& height) { return SolvePhotometricStereoAt(*stack, again, height); },
+      [&](const Image& height) {
+        const double start = Seconds();
+        out.counts = MarkCastShadows(height, stack, shadow_options);
+        out.mark_seconds += Seconds() - start;
+      },
+      progress);
   result.diffuse_roughness = roughness;
   ReportProgress(progress, "photometric stereo", 1.0);
   return result;

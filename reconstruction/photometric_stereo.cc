@@ -746,32 +746,9 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   const Image start(w, h, 1, static_cast<float>(options.integration.mean_height_mm), stack.grid.pitch_mm);
   PhotometricStereoResult result = SolveAt(solver, stack, options, start);
   if (solver.has_point_lights() && options.refine_height) {
-    IntegrationOptions integration = options.integration;
-    integration.pitch_mm = stack.grid.pitch_mm;
-    double previous_change = std::numeric_limits<double>::infinity();
-    for (int it = 1; it <= options.max_near_iterations; ++it) {
-      ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
-      // Confidence as integration weights: unreliable normals do not bend the height.
-      Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
-      PhotometricStereoResult next = SolveAt(solver, stack, options, height);
-      const double change = MeanNormalAngleDeg(next.normal, result.normal);
-      if (change >= previous_change) {
-        // Not converging (normals too unreliable to place the surface): keep the last round,
-        // whose change was the smallest.
-        LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
-                     << " deg after " << previous_change << " deg); kept round " << it - 1;
-        break;
-      }
-      previous_change = change;
-      result = std::move(next);
-      result.height_mm = std::move(height);
-      result.near_iterations = it;
-      result.last_normal_change_deg = change;
-      if (change < options.near_tolerance_deg) break;
-    }
-    if (result.near_iterations == options.max_near_iterations && result.last_normal_change_deg >= options.near_tolerance_deg)
-      LogWarning() << "photometric stereo: near-light refinement stopped after " << result.near_iterations
-                   << " rounds, normals still changing by " << result.last_normal_change_deg << " deg";
+    result = RefineNearLightHeights(
+        std::move(result), options, stack.grid.pitch_mm,
+        [&](const Image& height) { return SolveAt(solver, stack, options, height); }, [](const Image&) {}, progress);
   }
   if (solver.has_point_lights() && result.height_mm.empty()) result.height_mm = start;
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
@@ -799,6 +776,42 @@ double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions
   Solver solver(stack, options);
   SetDiffuseRoughness(solver, stack, options);
   return solver.burley() ? solver.roughness() : -1.0;
+}
+
+PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, const PhotometricStereoOptions& options,
+                                               double pitch_mm,
+                                               const std::function<PhotometricStereoResult(const Image&)>& solve_at,
+                                               const std::function<void(const Image&)>& at_height,
+                                               const ProgressCallback& progress) {
+  IntegrationOptions integration = options.integration;
+  integration.pitch_mm = pitch_mm;
+  double previous_change = std::numeric_limits<double>::infinity();
+  for (int it = 1; it <= options.max_near_iterations; ++it) {
+    ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
+    // Confidence as integration weights: unreliable normals do not bend the height.
+    Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
+    at_height(height);
+    PhotometricStereoResult next = solve_at(height);
+    const double change = MeanNormalAngleDeg(next.normal, result.normal);
+    if (change >= previous_change) {
+      // Not converging (normals too unreliable to place the surface): keep the last round,
+      // whose change was the smallest.
+      LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
+                   << " deg after " << previous_change << " deg); kept round " << it - 1;
+      at_height(result.height_mm);
+      break;
+    }
+    previous_change = change;
+    result = std::move(next);
+    result.height_mm = std::move(height);
+    result.near_iterations = it;
+    result.last_normal_change_deg = change;
+    if (change < options.near_tolerance_deg) break;
+  }
+  if (result.near_iterations == options.max_near_iterations && result.last_normal_change_deg >= options.near_tolerance_deg)
+    LogWarning() << "photometric stereo: near-light refinement stopped after " << result.near_iterations
+                 << " rounds, normals still changing by " << result.last_normal_change_deg << " deg";
+  return result;
 }
 
 double MeanNormalAngleDeg(const Image& a, const Image& b) {

@@ -15,6 +15,7 @@
 //
 // Algorithms, stability rules and measured accuracy: docs/reconstruction.md.
 
+#include <functional>
 #include <string>
 
 #include "core/image.h"
@@ -154,5 +155,18 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
 // Mean angle (degrees) between two normal maps of the same size (3 channels), over every pixel:
 // how far a refinement round moved the normals.
 double MeanNormalAngleDeg(const Image& a, const Image& b);
+
+// The near-light height refinement from a first solve `result`: integrate its normals (confidence as
+// weights, options.integration at pitch_mm), call at_height(height) (a caller may renew per-height
+// data there: the shadow marks), solve_at(height), and repeat until the mean normal change is below
+// options.near_tolerance_deg or after options.max_near_iterations rounds. A round that changes the
+// normals more than the one before is rejected (not converging): the previous round is kept and
+// at_height is called once more with its height, so that what it renewed matches the result.
+// Fills height_mm, near_iterations and last_normal_change_deg of the result.
+PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, const PhotometricStereoOptions& options,
+                                               double pitch_mm,
+                                               const std::function<PhotometricStereoResult(const Image&)>& solve_at,
+                                               const std::function<void(const Image&)>& at_height,
+                                               const ProgressCallback& progress = {});
 
 }  // namespace u3mscan::reconstruction
