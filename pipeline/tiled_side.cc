@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numbers>
 
 #include "capture/stack_builder.h"
 #include "core/logging.h"
@@ -105,17 +104,6 @@ void PasteBand(const PhotometricStereoResult& band, int row0, PhotometricStereoR
 }
 
 // Mean angle between two normal maps, degrees (as RunPhotometricStereo's refinement measures it).
-double MeanAngleDeg(const Image& a, const Image& b) {
-  const std::size_t n = a.pixel_count();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d va(a.data()[i], a.data()[n + i], a.data()[2 * n + i]);
-    const Eigen::Vector3d vb(b.data()[i], b.data()[n + i], b.data()[2 * n + i]);
-    sum += std::atan2(va.cross(vb).norm(), va.dot(vb));
-  }
-  return n > 0 ? sum / static_cast<double>(n) * 180.0 / std::numbers::pi : 0.0;
-}
-
 fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   fitting::FitResult band;
   band.base_color = CropRows(fit.base_color, row0, rows);
@@ -260,7 +248,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       const reconstruction::CastShadowCounts kept_counts = shadow_counts;
       PhotometricStereoResult next = solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
                                                  "photometric stereo (near-light round)");
-      const double change = MeanAngleDeg(next.normal, ps.normal);
+      const double change = reconstruction::MeanNormalAngleDeg(next.normal, ps.normal);
       if (change >= previous_change) {
         LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
                      << " deg after " << previous_change << " deg); kept round " << it - 1;
