@@ -145,6 +145,15 @@ class DctPlan {
     Restore(a, b);
   }
 
+  // Forward or inverse of line a, and of line b with it when b is not null.
+  void Transform(double* a, double* b, bool forward) {
+    if (b) {
+      forward ? ForwardPair(a, b) : InversePair(a, b);
+    } else {
+      forward ? Forward(a) : Inverse(a);
+    }
+  }
+
  private:
   // in_ = va (+ i vb): the even samples forward, then the odd ones backward.
   void Reorder(const double* a, const double* b) {
@@ -266,12 +275,7 @@ class PoissonDctSolver {
       DctPlan plan(width_);
       for (std::size_t p = begin; p < end; ++p) {
         double* a = values.data() + 2 * p * width_;
-        if (2 * p + 1 < static_cast<std::size_t>(height_)) {
-          double* b = a + width_;
-          forward ? plan.ForwardPair(a, b) : plan.InversePair(a, b);
-        } else {
-          forward ? plan.Forward(a) : plan.Inverse(a);
-        }
+        plan.Transform(a, 2 * p + 1 < static_cast<std::size_t>(height_) ? a + width_ : nullptr, forward);
       }
     });
   }
@@ -290,12 +294,7 @@ class PoissonDctSolver {
           for (int j = 0; j < nc; ++j) column[j * height_ + r] = values[static_cast<std::size_t>(r) * width_ + c0 + j];
         for (int j = 0; j < nc; j += 2) {
           double* a = &column[j * height_];
-          if (j + 1 < nc) {
-            double* b = a + height_;
-            forward ? plan.ForwardPair(a, b) : plan.InversePair(a, b);
-          } else {
-            forward ? plan.Forward(a) : plan.Inverse(a);
-          }
+          plan.Transform(a, j + 1 < nc ? a + height_ : nullptr, forward);
         }
         for (int r = 0; r < height_; ++r)
           for (int j = 0; j < nc; ++j) values[static_cast<std::size_t>(r) * width_ + c0 + j] = column[j * height_ + r];
