@@ -1108,11 +1108,10 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
 
   // Hidden lobe (docs/fitting.md, LeaveOutHiddenLobeRoughness): only a capture with saturated
   // highlights can measure a lobe at the lower bound.
-  std::size_t capture_saturated = 0;
-  for (const Observation& o : stack.observations) {
-    for (std::uint8_t f : o.flags) capture_saturated += (f & kSaturated) != 0 ? 1 : 0;
-  }
-  for (int id : LeaveOutHiddenLobeRoughness(capture_saturated > 0, &model.clusters)) {
+  const bool capture_saturated = std::any_of(stack.observations.begin(), stack.observations.end(), [](const Observation& o) {
+    return std::any_of(o.flags.begin(), o.flags.end(), [](std::uint8_t f) { return (f & kSaturated) != 0; });
+  });
+  for (int id : LeaveOutHiddenLobeRoughness(capture_saturated, &model.clusters)) {
     LogWarning() << "fitting: cluster " << id << ": roughness "
                  << model.clusters[id].parameters[kRoughness].reason;
   }
