@@ -32,6 +32,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
     std::string format = "dng";
     bool no_calibration = false;
     bool no_pose = false;
+    std::string calibration_roles = "all";
     std::string out;
   };
   auto args = std::make_shared<Args>();
@@ -48,6 +49,10 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
                  "0 = auto: 3 up to 1.5 MP, 2 up to 12 MP, 1 above")
       ->capture_default_str();
   sub.add_flag("--no-calibration", args->no_calibration, "Write sample and ambient frames only");
+  sub.add_option("--calibration-frames", args->calibration_roles,
+                 "Calibration roles to render, comma-separated: dark, flat, board, sphere, chart, backlight, or all "
+                 "(dark,flat: a scanner whose geometry and colour the manifest gives, with a flat field per light)")
+      ->capture_default_str();
   sub.add_flag("--no-pose", args->no_pose, "Leave camera poses out of capture.json (calibration finds them from the board)");
   sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();
   return std::function<int()>([args] {
@@ -56,6 +61,8 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
     if (!format) throw InputError("--format", "", "dng, tiff or exr, got '" + args->format + "'");
     args->options.capture.format = *format;
     args->options.capture.calibration_frames = !args->no_calibration;
+    args->options.capture.calibration_roles =
+        synthetic::CalibrationRolesFromList(args->calibration_roles, "--calibration-frames");
     args->options.capture.write_pose = !args->no_pose;
     ProgressBar bar(GetLogLevel() > LogLevel::kInfo);
     args->options.capture.progress = bar.Callback();

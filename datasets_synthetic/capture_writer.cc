@@ -104,15 +104,20 @@ std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const 
     }
     if (ambient) add(c, "frames/" + cam + "/ambient" + ext, FrameRole::kAmbient, std::nullopt, [](SceneRenderer& r) { return r.AmbientImage(); });
     if (!options.calibration_frames) continue;
+    auto wanted = [&options](FrameRole role) { return options.calibration_roles.count(role) > 0; };
     const std::string dir = "calibration/" + cam + "/";
-    add(c, dir + "dark" + ext, FrameRole::kDark, std::nullopt, [&rig, c](SceneRenderer&) { return RenderDarkFrame(rig, c); });
-    for (int l = 0; l < static_cast<int>(rig.lights.size()); ++l) {
+    if (wanted(FrameRole::kDark)) {
+      add(c, dir + "dark" + ext, FrameRole::kDark, std::nullopt, [&rig, c](SceneRenderer&) { return RenderDarkFrame(rig, c); });
+    }
+    for (int l = 0; wanted(FrameRole::kFlat) && l < static_cast<int>(rig.lights.size()); ++l) {
       add(c, dir + "flat_" + rig.lights[l].id + ext, FrameRole::kFlat, l,
           [&rig, &targets, c, l](SceneRenderer&) { return RenderFlatFrame(rig, c, targets, l); });
     }
-    add(c, dir + "board" + ext, FrameRole::kBoard, board_light,
-        [&rig, &targets, c, board_light](SceneRenderer&) { return RenderBoardFrame(rig, c, targets, board_light); });
-    if (HasHoles(scene)) {
+    if (wanted(FrameRole::kBoard)) {
+      add(c, dir + "board" + ext, FrameRole::kBoard, board_light,
+          [&rig, &targets, c, board_light](SceneRenderer&) { return RenderBoardFrame(rig, c, targets, board_light); });
+    }
+    if (wanted(FrameRole::kBacklight) && HasHoles(scene)) {
       const double level = targets.backlight_level;
       add(c, dir + "backlight" + ext, FrameRole::kBacklight, std::nullopt, [level](SceneRenderer& r) {
         const Image a = r.RenderBacklight(level);
@@ -122,15 +127,17 @@ std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const 
       });
     }
     if (c != 0) continue;  // lights and colour are calibrated from the top camera
-    for (std::size_t p = 0; p < targets.sphere_centers_mm.size(); ++p) {
+    for (std::size_t p = 0; wanted(FrameRole::kSphere) && p < targets.sphere_centers_mm.size(); ++p) {
       for (int l = 0; l < static_cast<int>(rig.lights.size()); ++l) {
         add(c, dir + "sphere_p" + std::to_string(p) + "_" + rig.lights[l].id + ext, FrameRole::kSphere, l,
             [&rig, &targets, c, l, p](SceneRenderer&) { return RenderSphereFrame(rig, c, targets, l, static_cast<int>(p)); });
         jobs.back().spec.extra["sphere_placement"] = p;
       }
     }
-    add(c, dir + "chart" + ext, FrameRole::kChart, board_light,
-        [&rig, &targets, c, board_light](SceneRenderer&) { return RenderChartFrame(rig, c, targets, board_light); });
+    if (wanted(FrameRole::kChart)) {
+      add(c, dir + "chart" + ext, FrameRole::kChart, board_light,
+          [&rig, &targets, c, board_light](SceneRenderer&) { return RenderChartFrame(rig, c, targets, board_light); });
+    }
   }
   return jobs;
 }
@@ -181,16 +188,22 @@ Manifest BuildManifest(const SceneTruth& scene, const Rig& rig, const CaptureOpt
     m.lights.push_back(std::move(l));
   }
   for (const FrameJob& job : jobs) m.frames.push_back(job.spec);
-  if (options.calibration_frames) {
+  // The targets of the frames written, and only those (a manifest describes what it uses).
+  auto written = [&jobs](FrameRole role) {
+    return std::any_of(jobs.begin(), jobs.end(), [role](const FrameJob& job) { return job.spec.role == role; });
+  };
+  if (written(FrameRole::kBoard)) {
     const BoardSpec& b = targets.board;
     m.targets.board = BoardTarget{b.squares_x, b.squares_y, b.square_mm, b.marker_mm, b.dictionary};
-    m.targets.white = WhiteTarget{targets.white_reflectance};
+  }
+  if (written(FrameRole::kFlat)) m.targets.white = WhiteTarget{targets.white_reflectance};
+  if (written(FrameRole::kSphere)) {
     SphereTarget sphere;
     sphere.radius_mm = targets.sphere_radius_mm;
     if (targets.sphere_centers_mm.size() == 1) sphere.center_mm = targets.sphere_centers_mm[0];
     m.targets.sphere = sphere;
-    m.targets.chart = ChartTarget{"macbeth24"};
   }
+  if (written(FrameRole::kChart)) m.targets.chart = ChartTarget{"macbeth24"};
   return m;
 }
 
@@ -372,6 +385,31 @@ std::optional<FrameFormat> FrameFormatFromName(const std::string& name) {
   if (name == "tiff" || name == "tif") return FrameFormat::kTiff;
   if (name == "exr") return FrameFormat::kExr;
   return std::nullopt;
+}
+
+std::set<FrameRole> AllCalibrationRoles() {
+  return {FrameRole::kDark, FrameRole::kFlat, FrameRole::kBoard, FrameRole::kSphere, FrameRole::kChart,
+          FrameRole::kBacklight};
+}
+
+std::set<FrameRole> CalibrationRolesFromList(const std::string& list, const std::string& option) {
+  if (list == "all") return AllCalibrationRoles();
+  const std::set<FrameRole> all = AllCalibrationRoles();
+  std::set<FrameRole> roles;
+  std::size_t start = 0;
+  while (start <= list.size()) {
+    const std::size_t comma = std::min(list.find(',', start), list.size());
+    const std::string name = list.substr(start, comma - start);
+    const std::optional<FrameRole> role = FrameRoleFromName(name);
+    if (!role || all.count(*role) == 0) {
+      throw InputError(option, "",
+                       "a comma-separated list of calibration roles (dark, flat, board, sphere, chart, backlight) "
+                       "or 'all', got '" + name + "' in '" + list + "'");
+    }
+    roles.insert(*role);
+    start = comma + 1;
+  }
+  return roles;
 }
 
 CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, const CaptureOptions& options,

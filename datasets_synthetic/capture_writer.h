@@ -19,8 +19,10 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <string>
 
+#include "capture/manifest.h"
 #include "core/progress.h"
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/scene.h"
@@ -42,9 +44,20 @@ std::optional<FrameFormat> FrameFormatFromName(const std::string& name);
 using TruthWriter = std::function<void(const SceneTruth& scene, const nlohmann::json& extra,
                                        const std::filesystem::path& truth_dir)>;
 
+// Every calibration role the synthetic scanner can render (docs/capture-format.md, "Frame roles").
+std::set<FrameRole> AllCalibrationRoles();
+// "dark,flat" -> {kDark, kFlat}; "all" -> AllCalibrationRoles(). Throws InputError naming `option`
+// for a name that is not a calibration role (sample and ambient frames are always written).
+std::set<FrameRole> CalibrationRolesFromList(const std::string& list, const std::string& option);
+
 struct CaptureOptions {
   FrameFormat format = FrameFormat::kDng;
-  bool calibration_frames = true;  // dark, flat, board, sphere, chart, backlight
+  bool calibration_frames = true;  // false: sample and ambient frames only, whatever calibration_roles says
+  // With calibration_frames, the roles written (default: all of them). {kDark, kFlat} is a scanner
+  // whose geometry comes from the manifest and which takes a flat field per light: the flats
+  // measure the irradiance, the lens vignetting included, and nothing else is calibrated.
+  // Backlight frames are written only for scenes with holes, whatever is asked.
+  std::set<FrameRole> calibration_roles = AllCalibrationRoles();
   bool write_pose = true;          // false: cameras without pose, calibration must find it (board)
   // Rays per camera pixel along each axis for the sample frames (RenderOptions::supersample).
   int supersample = 1;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <set>
 #include <unistd.h>
 #include <thread>
@@ -99,6 +100,44 @@ TEST_F(CaptureWriterTest, WrittenManifestPassesReadManifestWithEveryRole) {
   int entries = 0;
   for (const auto& e : fs::directory_iterator(root_)) entries += e.path().filename() == "all" ? 1 : 100;
   EXPECT_EQ(entries, 1);
+}
+
+// A scanner that takes only its radiometric calibration (dark, a flat per light): those frames and
+// the white target are written, no board, sphere or chart frames nor their targets.
+TEST_F(CaptureWriterTest, ChosenCalibrationRolesAreTheOnlyOnesWritten) {
+  CaptureOptions options;
+  options.format = FrameFormat::kTiff;
+  options.calibration_roles = {FrameRole::kDark, FrameRole::kFlat};
+  const fs::path dir = root_ / "flats";
+  WriteSyntheticCapture(scene_, rig_, options, dir);
+  const Manifest m = ReadManifest(dir / kCaptureSubdir);
+  std::map<FrameRole, int> count;
+  for (const FrameSpec& f : m.frames) ++count[f.role];
+  EXPECT_EQ(count[FrameRole::kSample], static_cast<int>(rig_.lights.size()));
+  EXPECT_EQ(count[FrameRole::kFlat], static_cast<int>(rig_.lights.size()));
+  EXPECT_EQ(count[FrameRole::kDark], 1);
+  for (FrameRole r : {FrameRole::kBoard, FrameRole::kSphere, FrameRole::kChart, FrameRole::kBacklight}) {
+    EXPECT_EQ(count[r], 0) << FrameRoleName(r);
+  }
+  EXPECT_TRUE(m.targets.white.has_value());
+  EXPECT_FALSE(m.targets.board.has_value());
+  EXPECT_FALSE(m.targets.sphere.has_value());
+  EXPECT_FALSE(m.targets.chart.has_value());
+}
+
+TEST(CalibrationRolesFromList, ParsesNamesAndAllAndRejectsTheRestNamingTheOption) {
+  EXPECT_EQ(CalibrationRolesFromList("dark,flat", "--calibration-frames"),
+            (std::set<FrameRole>{FrameRole::kDark, FrameRole::kFlat}));
+  EXPECT_EQ(CalibrationRolesFromList("all", "--calibration-frames"), AllCalibrationRoles());
+  EXPECT_EQ(AllCalibrationRoles().size(), 6u);
+  for (const char* bad : {"dark,flats", "sample", "", "flat,"}) {
+    try {
+      CalibrationRolesFromList(bad, "--calibration-frames");
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--calibration-frames"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST_F(CaptureWriterTest, ObliqueRigWithoutPosesPassesReadManifest) {
