@@ -4,6 +4,10 @@
 
 #include <cmath>
 #include <iostream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
 
 #include "core/error.h"
 #include "core/units.h"
@@ -102,6 +106,67 @@ TEST(PointLight, OnePlacementTakesTheDistanceFromTheManifest) {
       FitPointLight({ObserveSphere(frame, camera, {kSphereRadiusMm, centre}, "s.tif", centre)}, start, no_prior);
   EXPECT_LT((fit.model.position_in_world_mm - truth).norm(), kMaxPositionErrorRelative * truth.norm() + 10.0);
   EXPECT_FALSE(fit.note.empty());
+}
+
+// Hand-made highlights of small spheres a few mm apart (the 64 px synthetic near rig: spheres 8 px
+// across, 400 mm from their lights): a highlight ray from `point` toward `light`, turned by
+// `error_deg` about the x axis.
+SphereObservation Highlight(const std::string& file, const Eigen::Vector3d& point, const Eigen::Vector3d& light,
+                            double error_deg) {
+  SphereObservation o;
+  o.frame_file = file;
+  o.radius_mm = 0.65;
+  o.centre_in_world_mm = point - Eigen::Vector3d(0, 0, o.radius_mm);
+  o.highlight_point_in_world_mm = point;
+  o.reflected_in_world = Eigen::AngleAxisd(DegToRad(error_deg), Eigen::Vector3d::UnitX()) * (light - point).normalized();
+  o.apparent_radius_px = 8.0;
+  o.highlight_area_px = 1;
+  return o;
+}
+
+TEST(PointLight, AMisplacedHighlightIsLeftOutNamingItsFrame) {
+  const Eigen::Vector3d truth(212.0, 90.0, 336.0);
+  const std::vector<SphereObservation> observations = {
+      Highlight("sphere_p0.tif", {-1.0, -1.0, 1.3}, truth, 0.05),
+      Highlight("sphere_p1.tif", {1.0, -1.0, 1.3}, truth, -0.05),
+      Highlight("sphere_p2.tif", {0.0, 1.0, 1.3}, truth, 25.0),  // a rim pixel taken for the highlight
+  };
+  LightModel start;
+  start.type = LightType::kPoint;
+  // The manifest exact: rays of spheres 8 px across are located to ~30 mm laterally at 400 mm, less
+  // well than the prior's 10 mm, so the misplaced ray (170 mm off) would still drag the fit ~15 mm.
+  start.position_in_world_mm = truth;
+  const LightFit fit = FitPointLight(observations, start);
+  std::cout << "measured: point light with one misplaced highlight: position error "
+            << (fit.model.position_in_world_mm - truth).norm() << " mm (" << fit.note << ")\n";
+  EXPECT_LT((fit.model.position_in_world_mm - truth).norm(), kMaxPositionErrorRelative * truth.norm());
+  EXPECT_EQ(fit.placements, 2);
+  EXPECT_NE(fit.note.find("sphere_p2.tif left out"), std::string::npos) << fit.note;
+  EXPECT_EQ(fit.note.find("sphere_p0.tif"), std::string::npos) << fit.note;
+}
+
+TEST(PointLight, RaysThatMeetBehindTheSpheresKeepTheManifestDistance) {
+  // Two spheres 2 mm apart along x whose rays are turned by +-0.1 deg about x: as lines they come
+  // closest at the spheres themselves. Triangulation cannot tell the distance; the light must stay
+  // at the manifest's distance along the rays, never beside the spheres.
+  const Eigen::Vector3d truth(0.0, 250.0, 300.0);
+  const std::vector<SphereObservation> observations = {
+      Highlight("sphere_p0.tif", {-1.0, 0.0, 1.3}, truth, 0.1),
+      Highlight("sphere_p1.tif", {1.0, 0.0, 1.3}, truth, -0.1),
+  };
+  LightModel start;
+  start.type = LightType::kPoint;
+  start.position_in_world_mm = truth;
+  for (double prior_mm : {0.0, 10.0}) {
+    LightFitOptions options;
+    options.manifest_position_sigma_mm = prior_mm;
+    const LightFit fit = FitPointLight(observations, start, options);
+    const double distance = (fit.model.position_in_world_mm - observations[0].highlight_point_in_world_mm).norm();
+    std::cout << "measured: prior " << prior_mm << " mm: distance " << distance << " mm for "
+              << truth.norm() << " (" << fit.note << ")\n";
+    EXPECT_NEAR(distance, truth.norm(), kMaxPositionErrorRelative * truth.norm()) << fit.note;
+    EXPECT_LT(AngleDeg(fit.model.position_in_world_mm, truth), kMaxDirectionErrorDeg);
+  }
 }
 
 TEST(SphereErrors, SphereNotFoundNamesTheFrame) {
