@@ -76,9 +76,9 @@ StepRecord CastShadowStep(const StageOptions& options, double share, bool near, 
 bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
                         SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
 
-// Relative re-rendering residual per pixel, |render - data| / data averaged over colour channels and
-// over up to `max_observations` observations spread over the stack (1 channel, >= 0; 0 where no
-// observation is usable). `mean_out` receives the mean over usable pixels.
+// Relative re-rendering residual per pixel, sum_c |render - data| / (0.5 sum_c (render + data)),
+// averaged over up to `max_observations` observations spread over the stack (1 channel, in [0, 2];
+// 0 where no observation is usable: flagged, or no positive data). `mean_out` receives the mean over usable pixels.
 // `pixels_out` (optional) receives the number of usable pixels.
 Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                      int max_observations, double* mean_out, std::size_t* pixels_out = nullptr);
