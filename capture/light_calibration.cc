@@ -22,6 +22,18 @@ constexpr double kMinDistanceOfManifest = 0.5;
 // sphere 8 px across agree to ~0.3 deg).
 constexpr double kMaxRayMissOfDistance = 0.02;
 
+// The point of a sphere's reflected ray nearest to the manifest's light position: the direction
+// from the sphere, the distance along the ray from the manifest. Averaged over several rays, the
+// same for each.
+Eigen::Vector3d ManifestDistanceAlongRays(const std::vector<SphereObservation>& observations, const LightModel& start) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const auto& o : observations) {
+    const double along = std::max(0.0, o.reflected_in_world.dot(start.position_in_world_mm - o.highlight_point_in_world_mm));
+    sum += o.highlight_point_in_world_mm + along * o.reflected_in_world;
+  }
+  return sum / static_cast<double>(observations.size());
+}
+
 float SampleBilinear(const cv::Mat& grey, double x, double y) {
   x = std::clamp(x, 0.0, grey.cols - 1.001);
   y = std::clamp(y, 0.0, grey.rows - 1.001);
@@ -349,9 +361,7 @@ LightFit FitPointLight(const std::vector<SphereObservation>& observations, const
   if (observations.empty()) return fit;
   const bool prior = options.manifest_position_sigma_mm > 0.0;
   if (observations.size() == 1 && !prior) {
-    const auto& o = observations.front();
-    const double along = std::max(0.0, o.reflected_in_world.dot(start.position_in_world_mm - o.highlight_point_in_world_mm));
-    fit.model.position_in_world_mm = o.highlight_point_in_world_mm + along * o.reflected_in_world;
+    fit.model.position_in_world_mm = ManifestDistanceAlongRays(observations, start);
     fit.note = "one placement: direction from the sphere, distance along the ray from the manifest";
     return fit;
   }
@@ -388,8 +398,9 @@ LightFit FitPointLight(const std::vector<SphereObservation>& observations, const
     x = a.ldlt().solve(b);
   }
   // A highlight found in the wrong place (a rim pixel, a reflection of the table on a sphere a few
-  // pixels across) gives a ray that misses the light by degrees; at most one such ray per round
-  // is left out, the worst, while two or more remain (synthetic near rig, 64 px frames: one
+  // pixels across) gives a ray that misses the light by degrees; the worst such ray is left out
+  // and the rest fitted again, as long as two or more rays are there to compare (so one may
+  // remain; with two, the prior decides which misses more) (synthetic near rig, 64 px frames: one
   // highlight of L08 and one of L11 put the fit 20 mm and 2.6-3.1 deg off, the rays missing the
   // fit by 41-42 mm RMS where the other lights' missed by 0.1-1.7 mm).
   if (observations.size() >= 2) {
@@ -427,13 +438,9 @@ LightFit FitPointLight(const std::vector<SphereObservation>& observations, const
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(a.inverse());
   const double sigma_mm = std::sqrt(std::max(0.0, eigen.eigenvalues().maxCoeff()));
-  if (!ahead || sigma_mm > kMinDistanceOfManifest * manifest_distance) {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (const auto& o : observations) {
-      const double along = std::max(0.0, o.reflected_in_world.dot(start.position_in_world_mm - o.highlight_point_in_world_mm));
-      sum += o.highlight_point_in_world_mm + along * o.reflected_in_world;
-    }
-    x = sum / static_cast<double>(observations.size());
+  const bool distance_from_manifest = !ahead || sigma_mm > kMinDistanceOfManifest * manifest_distance;
+  if (distance_from_manifest) {
+    x = ManifestDistanceAlongRays(observations, start);
     fit.note = !ahead ? "the reflected rays meet behind or next to the spheres" : "the reflected rays are nearly parallel";
     fit.note += " (too short a baseline for the distance): direction from the spheres, distance along the rays from "
                 "the manifest";
@@ -446,7 +453,7 @@ LightFit FitPointLight(const std::vector<SphereObservation>& observations, const
     sum_sq += (d - d.dot(o.reflected_in_world) * o.reflected_in_world).squaredNorm();
   }
   fit.residual = std::sqrt(sum_sq / observations.size());
-  if (!fit.note.empty()) return fit;
+  if (distance_from_manifest) return fit;
   fit.position_sigma_mm = sigma_mm;
   std::ostringstream note;
   note << "position 1-sigma " << fit.position_sigma_mm << " mm";
