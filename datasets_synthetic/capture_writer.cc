@@ -89,6 +89,7 @@ std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const 
     jobs.push_back(std::move(job));
   };
   const int board_light = HighestLight(rig);
+  auto wanted = [&options](FrameRole role) { return options.calibration_roles.count(role) > 0; };
   const bool ambient = rig.ambient_irradiance > 0;
   for (int c = 0; c < static_cast<int>(rig.cameras.size()); ++c) {
     const std::string cam = rig.cameras[c].id;
@@ -104,7 +105,6 @@ std::vector<FrameJob> PlanFrames(const SceneTruth& scene, const Rig& rig, const 
     }
     if (ambient) add(c, "frames/" + cam + "/ambient" + ext, FrameRole::kAmbient, std::nullopt, [](SceneRenderer& r) { return r.AmbientImage(); });
     if (!options.calibration_frames) continue;
-    auto wanted = [&options](FrameRole role) { return options.calibration_roles.count(role) > 0; };
     const std::string dir = "calibration/" + cam + "/";
     if (wanted(FrameRole::kDark)) {
       add(c, dir + "dark" + ext, FrameRole::kDark, std::nullopt, [&rig, c](SceneRenderer&) { return RenderDarkFrame(rig, c); });

@@ -301,9 +301,8 @@ Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const Si
       // one pixel at 31781, the map's mean 0.18 where 0.06 of it came from the rest; a 36 MP one:
       // the mean 121). Now each pixel lies in [0, 2], and where render and data agree within a few
       // per cent the two measures are the same.
-      const double scale = 0.5 * (data + rendered);
-      if (!(data > 0.0) || !(scale > 0.0) || !std::isfinite(diff)) continue;
-      residual.plane(0)[i] += static_cast<float>(diff / scale);
+      if (!(data > 0.0) || !std::isfinite(diff)) continue;  // a render is >= 0: the mean below is > 0
+      residual.plane(0)[i] += static_cast<float>(diff / (0.5 * (data + rendered)));
       count[i] += 1.0f;
     }
   }

@@ -78,14 +78,14 @@ struct TruthCase {
   bool all_calibration_frames;
 };
 
-std::string CaseName(const ::testing::TestParamInfo<TruthCase>& info) {
-  return std::string(info.param.rig) + (info.param.all_calibration_frames ? "_all_calibration" : "_dark_and_flats");
+std::string CaseName(const TruthCase& c) {
+  return std::string(c.rig) + (c.all_calibration_frames ? "_all_calibration" : "_dark_and_flats");
 }
 
 class ProcessTruth : public ::testing::TestWithParam<TruthCase> {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() / ("u3mscan_process_truth_" + CaseName({GetParam(), 0}) + "_" +
+    root_ = fs::temp_directory_path() / ("u3mscan_process_truth_" + CaseName(GetParam()) + "_" +
                                          std::to_string(::getpid()));
     fs::remove_all(root_);
     synthetic::RigOptions rig_options;
@@ -114,7 +114,7 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
   options.debug_maps = true;  // maps/*.exr for the evaluation
   ProcessCapture(job, options);
   const bench::Evaluation e = bench::Evaluate(job.out_dir, root_ / "bumps" / synthetic::kTruthSubdir);
-  std::cout << "[ MEASURED ] " << CaseName({GetParam(), 0}) << "\n" << bench::EvaluationToText(e);
+  std::cout << "[ MEASURED ] " << CaseName(GetParam()) << "\n" << bench::EvaluationToText(e);
 
   ASSERT_GT(e.pixels_compared, 0);
   EXPECT_LT(e.normal_mean_deg, kNormalMeanDeg);
@@ -137,7 +137,7 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
 INSTANTIATE_TEST_SUITE_P(Rigs, ProcessTruth,
                          ::testing::Values(TruthCase{"distant", false}, TruthCase{"near", false},
                                            TruthCase{"distant", true}, TruthCase{"near", true}),
-                         CaseName);
+                         [](const ::testing::TestParamInfo<TruthCase>& info) { return CaseName(info.param); });
 
 }  // namespace
 }  // namespace u3mscan
