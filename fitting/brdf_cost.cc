@@ -5,6 +5,7 @@
 #include <ceres/autodiff_cost_function.h>
 #include <ceres/jet.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -25,6 +26,9 @@ constexpr double kMinLuminance = 1e-6;
 constexpr double kTinyNormal = 1e-300;
 // A secant step is taken only when the slope estimate is not lost in rounding.
 constexpr double kTinySecant = 1e-12;
+// Step (radians, ~0.06 deg) of the normal-tilt differences: the BRDF is smooth over it except at a
+// horizon, where a one-sided kink costs O(step) in one derivative of one observation.
+constexpr double kNormalTiltStepRad = 1e-3;
 // Below this squared residual the Cauchy factor is 1 to rounding; avoids 0/0.
 constexpr double kTinySquaredResidual = 1e-20;
 
@@ -230,6 +234,34 @@ bool EvaluatePixelJacobian(const ParameterVector& params, std::span<const LocalO
     jacobian_blocks[i] = jacobian->col(i).data();
   }
   return cost->Evaluate(parameter_blocks, residuals->data(), jacobian_blocks);
+}
+
+bool EvaluateNormalTiltJacobian(const ParameterVector& params, std::span<const LocalObservation> observations,
+                                const PixelCostSettings& settings, std::vector<LocalObservation>& scratch,
+                                Eigen::MatrixXd* jacobian) {
+  const std::size_t n = observations.size();
+  const int m = static_cast<int>(3 * n);
+  jacobian->resize(m, 2);
+  scratch.resize(n);
+  thread_local std::vector<double> plus, minus;
+  plus.resize(m);
+  minus.resize(m);
+  for (int axis = 0; axis < 2; ++axis) {
+    for (const double sign : {1.0, -1.0}) {
+      // Tilting the normal by +a about a local axis is seeing every direction turned by -a about it.
+      const double angle = -sign * kNormalTiltStepRad;
+      const Eigen::Matrix3d turn =
+          Eigen::AngleAxisd(angle, axis == 0 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).toRotationMatrix();
+      for (std::size_t o = 0; o < n; ++o) {
+        scratch[o] = observations[o];
+        scratch[o].light_local = turn * observations[o].light_local;
+        scratch[o].view_local = turn * observations[o].view_local;
+      }
+      PixelResiduals(params, scratch, settings, sign > 0 ? plus.data() : minus.data());
+    }
+    for (int r = 0; r < m; ++r) (*jacobian)(r, axis) = (plus[r] - minus[r]) / (2.0 * kNormalTiltStepRad);
+  }
+  return jacobian->allFinite();
 }
 
 Eigen::Vector3d RenderLocal(const ParameterVector& params, const Eigen::Vector3d& base_color,

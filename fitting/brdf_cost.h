@@ -112,6 +112,15 @@ bool EvaluatePixelJacobian(const ParameterVector& params, std::span<const LocalO
                            const PixelCostSettings& settings, Eigen::VectorXd* residuals,
                            Eigen::MatrixXd* jacobian);
 
+// Jacobian (3n x 2) of the same residuals with respect to two tilts of the pixel's normal, in
+// radians about the local x and y axes (central differences; the base colour is solved again at
+// each step, as in the residuals). For observability: a lobe that a small tilt of the normal can
+// imitate is not measured by the pixel. `scratch` is resized to n and reused (no allocation once
+// it is large enough).
+bool EvaluateNormalTiltJacobian(const ParameterVector& params, std::span<const LocalObservation> observations,
+                                const PixelCostSettings& settings, std::vector<LocalObservation>& scratch,
+                                Eigen::MatrixXd* jacobian);
+
 // Rendered value of one observation: f * cos_l * E in linear RGB (0 below either horizon).
 Eigen::Vector3d RenderLocal(const ParameterVector& params, const Eigen::Vector3d& base_color,
                             const Eigen::Vector3d& light_local, const Eigen::Vector3d& view_local,

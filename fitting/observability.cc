@@ -106,6 +106,24 @@ ParameterVector PosteriorStdDev(const Matrix7& fisher, const ParameterMask& free
   return out;
 }
 
+Matrix7 PixelInformation(const Eigen::MatrixXd& parameter_jacobian, const Eigen::MatrixXd& normal_jacobian) {
+  Matrix7 information = parameter_jacobian.transpose() * parameter_jacobian;
+  if (normal_jacobian.cols() == 0) return information;
+  const Eigen::Matrix2d tilt_information = normal_jacobian.transpose() * normal_jacobian;
+  const Eigen::Matrix<double, 2, kFitParameterCount> cross = normal_jacobian.transpose() * parameter_jacobian;
+  // Pseudo-inverse of the 2 x 2 tilt block: a direction without information takes none.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(tilt_information);
+  const double lambda_max = std::max(eigen.eigenvalues().maxCoeff(), 0.0);
+  for (int j = 0; j < 2; ++j) {
+    const double lambda = eigen.eigenvalues()(j);
+    if (!(lambda > kNullEigenvalueFraction * lambda_max) || lambda <= 0.0) continue;
+    const Eigen::Matrix<double, 1, kFitParameterCount> projected = eigen.eigenvectors().col(j).transpose() * cross;
+    information.noalias() -= projected.transpose() * projected / lambda;
+  }
+  // The Schur complement is positive semi-definite; keep it exactly symmetric against rounding.
+  return 0.5 * (information + information.transpose());
+}
+
 ObservabilityDecision DecideObservability(const Matrix7& fisher, const ParameterMask& candidates,
                                           const ObservabilityContext& context, const ObservabilityOptions& options) {
   if (!options.Check()) throw std::invalid_argument("DecideObservability: invalid ObservabilityOptions");

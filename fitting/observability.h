@@ -8,6 +8,11 @@
 //   - systematic error (normals, calibration, model) does not average down with the number of
 //     pixels: F is scaled to at most `effective_pixels` pixels' worth of information;
 //   - a poor fit inflates the uncertainty: the covariance is multiplied by max(1, reduced chi^2).
+//   - the normals are estimates too (photometric stereo, then refined with the fit), so each
+//     sample pixel's two normal tilts are marginalised out of its information (Schur complement,
+//     PixelInformation below): a lobe that a small tilt of the normal imitates, such as a weak
+//     broad highlight over a pixel that averages the facets of a yarn's flank, is not claimed as
+//     measured.
 // A direction of F that carries no information (a parameter without effect, or two that trade
 // off exactly, e.g. specular_tint on a grey base) gives an infinite deviation.
 //
@@ -39,6 +44,9 @@ struct ObservabilityOptions {
   // down, but they exclude the default (e.g. roughness of a mirror-like sample whose highlights all
   // fall between the lights or saturate).
   double default_rejection_chi2 = 9.0;
+  // Marginalise each sample pixel's normal tilts (see above). Off treats the normals as exact,
+  // which claims too much on woven fabrics (docs/fitting.md "Woven scenes on honest captures").
+  bool marginalise_normals = true;
 
   bool Check() const;
 };
@@ -68,6 +76,14 @@ std::string LeaveOutHint(FitParameter parameter, const ObservabilityContext& con
 ParameterVector PosteriorStdDev(const Eigen::Matrix<double, kFitParameterCount, kFitParameterCount>& fisher,
                                 const ParameterMask& free, const ObservabilityContext& context,
                                 const ObservabilityOptions& options);
+
+// One pixel's Fisher information about the 7 parameters, J^T J of its weighted residuals
+// (`parameter_jacobian`, 3n x 7), with the information its normal's two tilts take
+// (`normal_jacobian`, 3n x 2; may be empty) marginalised out:
+//   J^T J - J^T Jn (Jn^T Jn)^+ Jn^T J.
+// A tilt direction without information (Jn^T Jn singular) takes none.
+Eigen::Matrix<double, kFitParameterCount, kFitParameterCount> PixelInformation(
+    const Eigen::MatrixXd& parameter_jacobian, const Eigen::MatrixXd& normal_jacobian);
 
 // The iterative leave-out rule over `candidates` (parameters the options let the fit estimate;
 // the others are reported as "held at the default by the options").

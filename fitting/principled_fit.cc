@@ -415,7 +415,8 @@ SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& fr
   return outcome;
 }
 
-// Fisher information J^T J (weighted-residual units) of the samples at `params`, and the cost.
+// Fisher information J^T J (weighted-residual units) of the samples at `params`, each pixel's
+// normal tilts marginalised when the options say so (observability.h), and the cost.
 Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& params, const FitOptions& options,
                           const ParameterMask& free, double* cost, int* residual_count) {
   Matrix7 fisher = Matrix7::Zero();
@@ -423,13 +424,18 @@ Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& 
   *residual_count = 0;
   Eigen::VectorXd r;
   Eigen::MatrixXd j;
+  Eigen::MatrixXd j_normal;
+  std::vector<LocalObservation> tilted;
   for (std::size_t p = 0; p < samples.pixels(); ++p) {
-    if (!EvaluatePixelJacobian(params, samples.pixel(p), Settings(options, params, free, samples.luminance_start[p]),
-                               &r, &j)) {
+    const PixelCostSettings settings = Settings(options, params, free, samples.luminance_start[p]);
+    if (!EvaluatePixelJacobian(params, samples.pixel(p), settings, &r, &j)) continue;
+    if (!r.allFinite() || !j.allFinite()) continue;
+    j_normal.resize(0, 0);
+    if (options.observability.marginalise_normals &&
+        !EvaluateNormalTiltJacobian(params, samples.pixel(p), settings, tilted, &j_normal)) {
       continue;
     }
-    if (!r.allFinite() || !j.allFinite()) continue;
-    fisher.noalias() += j.transpose() * j;
+    fisher.noalias() += PixelInformation(j, j_normal);
     *cost += 0.5 * r.squaredNorm();
     *residual_count += static_cast<int>(r.size());
   }

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <random>
 #include <vector>
@@ -92,6 +94,50 @@ TEST(BrdfCost, AutodiffJacobianMatchesFiniteDifferences) {
             << FitParameterName(k) << " residual " << i << " loss " << static_cast<int>(kind);
       }
     }
+  }
+}
+
+// Tilt of the normal in NormalTiltJacobianPredictsTheTiltedNormal: small enough for the linear
+// prediction, large enough that the untilted residuals are far above its O(tilt^2) error.
+constexpr double kTiltRad = 0.01;
+constexpr double kLinearPredictionShare = 0.05;  // of the untilted residual norm
+
+TEST(BrdfCost, NormalTiltJacobianPredictsTheTiltedNormal) {
+  // Data rendered with the normal tilted by kTiltRad about local x (then about y), fitted with the
+  // untilted normal: r(0) + J_tilt * tilt must explain the data (the residuals nearly vanish), which
+  // checks both the sign convention and the size of the tilt Jacobian.
+  const ParameterVector p = Params(0.5, 0.5, 0.0, 0.3, 0.0, 0.0, 0.0);
+  const Eigen::Vector3d color(0.5, 0.35, 0.2);
+  const auto flat = Render(p, color, 0.0, 3);
+  PixelCostSettings settings;
+  settings.loss.kind = RobustLossKind::kNone;
+  Eigen::MatrixXd j_tilt;
+  std::vector<LocalObservation> scratch;
+  ASSERT_TRUE(EvaluateNormalTiltJacobian(p, flat, settings, scratch, &j_tilt));
+  ASSERT_EQ(j_tilt.rows(), static_cast<int>(3 * flat.size()));
+  ASSERT_EQ(j_tilt.cols(), 2);
+  for (int axis = 0; axis < 2; ++axis) {
+    // The tilted normal n' = R(tilt) z; in the untilted local frame the data are those of the
+    // surface with normal n', i.e. the flat surface's data seen in directions turned by -tilt.
+    const Eigen::Vector3d axis_vector = axis == 0 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    const Eigen::Matrix3d to_tilted_frame = Eigen::AngleAxisd(-kTiltRad, axis_vector).toRotationMatrix();
+    std::vector<LocalObservation> data = flat;
+    PrincipledParams<double> params;
+    params.base_color = color;
+    params.roughness = p[0];
+    params.specular = p[1];
+    params.sheen = p[3];
+    for (LocalObservation& o : data) {
+      const Vec3<double> l(to_tilted_frame * o.light_local);
+      const Vec3<double> v(to_tilted_frame * o.view_local);
+      o.rgb = EvaluatePrincipled(params, l, v) * (std::max(0.0, l.z()) * o.irradiance);
+    }
+    std::vector<double> r0(3 * data.size());
+    PixelResiduals(p, data, settings, r0.data());
+    const Eigen::Map<const Eigen::VectorXd> untilted(r0.data(), static_cast<Eigen::Index>(r0.size()));
+    const Eigen::VectorXd predicted = untilted + j_tilt.col(axis) * kTiltRad;
+    ASSERT_GT(untilted.norm(), 0.0);
+    EXPECT_LT(predicted.norm(), kLinearPredictionShare * untilted.norm()) << "axis " << axis;
   }
 }
 
