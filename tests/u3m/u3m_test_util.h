@@ -9,6 +9,7 @@
 #include <sstream>
 #include <string>
 
+#include "tests/support/temp_dir.h"
 #include "u3m/json_value.h"
 #include "u3m/material.h"
 
@@ -19,27 +20,6 @@ namespace fs = std::filesystem;
 // Relative tolerance for numbers that went through a unit conversion (cm <-> mm, degrees <-> turns):
 // a few ulps of double rounding, nothing a writer may change on purpose.
 inline constexpr double kConversionRelTol = 1e-12;
-
-// A fresh, empty folder for one test, removed at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::path(::testing::TempDir()) / ("u3m_" + std::string(info->test_suite_name()) + "_" + info->name() + "_" +
-                                             NewUuid4().substr(0, 6));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  const fs::path& path() const { return path_; }
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-
- private:
-  fs::path path_;
-};
 
 inline std::string ReadFile(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);

@@ -1,12 +1,13 @@
 #pragma once
-// Small helpers shared by the u3m_package tests: a self-deleting temporary folder and shell calls.
+// Small helpers shared by the u3m_package tests: the shared temporary folder and shell calls.
 
 #include <sys/wait.h>
 
 #include <cstdlib>
 #include <filesystem>
-#include <stdexcept>
 #include <string>
+
+#include "tests/support/temp_dir.h"
 
 namespace u3mscan {
 
@@ -16,25 +17,7 @@ inline const char* const kSystemPython = U3MSCAN_SYSTEM_PYTHON;
 inline const char* const kSystemPython = "/usr/bin/python3";
 #endif
 
-// A fresh folder under the system temp dir, removed with everything in it at scope exit.
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (std::filesystem::temp_directory_path() / "u3m_package_test_XXXXXX").string();
-    if (!mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-    path_ = pattern;
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    std::filesystem::remove_all(path_, ignored);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using test::TempDir;  // tests/support/temp_dir.h
 
 // Single-quoted for /bin/sh.
 inline std::string Quote(const std::filesystem::path& path) {
