@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/principled_brdf.h"
+#include "fitting/shading_frame.h"
 #include "u3m/image_io.h"
 
 namespace u3mscan::bench {
@@ -82,13 +83,12 @@ Stats Summarise(std::vector<float> values) {
   return s;
 }
 
-// Local shading frame of a normal: z = n, x = world +x projected onto the tangent plane (the
+// Local shading frame of a normal turned by an anisotropy rotation (fitting/shading_frame.h, the
 // fitter's convention; the truth uses the scene's fibre direction when truth/tangent.exr exists).
-void LocalFrame(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
-  Eigen::Vector3d x = Eigen::Vector3d::UnitX() - n.x() * n;
-  if (x.squaredNorm() < 1e-12) x = Eigen::Vector3d::UnitY() - n.y() * n;
-  *t = x.normalized();
-  *b = n.cross(*t);
+void LocalFrame(const Eigen::Vector3d& n, double rotation_deg, Eigen::Vector3d* t, Eigen::Vector3d* b) {
+  const fitting::ShadingFrame frame = fitting::MakeShadingFrame(n, rotation_deg);
+  *t = frame.tangent;
+  *b = frame.bitangent;
 }
 
 // Held-out lights: directional, staggered between the usual ring azimuths, at three elevations,
@@ -185,6 +185,10 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   check_size(albedo, "albedo", 3);
   check_size(height, "height", 1);
   check_size(base_color, "base_color", 3);
+  // The fit's anisotropy rotation (degrees): its map where the run wrote one, else the material's
+  // constant (below), else 0.
+  const Image rotation_map = read_optional("anisotropy_rotation");
+  check_size(rotation_map, "anisotropy_rotation", 1);
   if (base_color.empty()) base_color = albedo;  // what the writer uses when the fit gives none
   const long long expected_w = std::llround(((*grid)["region_mm"][2].get<double>() - x0_mm) / pitch_mm);
   if (expected_w != w) {
@@ -201,6 +205,10 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
       written[name.substr(options.side.size() + 1)] = {p.value("source", std::string()), p.value("value", 0.0)};
       reliable[name.substr(options.side.size() + 1)] = p.value("reliable", true);
     }
+  }
+  double rotation_constant_deg = 0.0;
+  if (const auto it = written.find("anisotropy_rotation"); it != written.end() && it->second.first.rfind("not measured", 0) != 0) {
+    rotation_constant_deg = it->second.second;
   }
   Image estimate_maps[kParameterCount];
   Evaluation ev;
@@ -330,7 +338,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
         }
         ++sums.parameter_count;
         Eigen::Vector3d tt, tb, et, eb;
-        LocalFrame(nt, &tt, &tb);
+        LocalFrame(nt, 0.0, &tt, &tb);
         if (!truth.tangent.empty()) {  // the scene's fibre direction, as the renderer shades it
           Eigen::Vector3d fibre(Bilinear(truth.tangent, 0, s), Bilinear(truth.tangent, 1, s), Bilinear(truth.tangent, 2, s));
           fibre -= fibre.dot(nt) * nt;
@@ -339,7 +347,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
             tb = nt.cross(tt);
           }
         }
-        LocalFrame(ne, &et, &eb);
+        LocalFrame(ne, rotation_map.empty() ? rotation_constant_deg : rotation_map.at(0, row, col), &et, &eb);
         const Eigen::Vector3d vt(view_in_world.dot(tt), view_in_world.dot(tb), view_in_world.dot(nt));
         const Eigen::Vector3d ve(view_in_world.dot(et), view_in_world.dot(eb), view_in_world.dot(ne));
         double num = 0, den = 0;

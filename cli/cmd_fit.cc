@@ -49,6 +49,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       maps.emplace_back(std::string(fitting::FitParameterName(p)) + ".exr", fit.parameter_maps[p]);
     }
+    if (!fit.anisotropy_rotation_deg.empty()) maps.emplace_back("anisotropy_rotation.exr", fit.anisotropy_rotation_deg);
     WriteStageOutputs(args->out, maps, {{"fit.json", fitting::FitResultToJson(fit)}});
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       const auto& decision = fit.maps[p];
@@ -57,6 +58,9 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
                 << decision.value << (decision.reason.empty() ? "" : " (" + decision.reason + ")")
                 << (decision.measured && !decision.reliable ? " UNRELIABLE: " + decision.unreliable_reason : "") << "\n";
     }
+    const auto& turn = fit.rotation_report;
+    std::cout << "  anisotropy_rotation: " << (!turn.measured ? "not measured" : turn.constant ? "constant" : "map") << " "
+              << turn.value << " deg" << (turn.reason.empty() ? "" : " (" + turn.reason + ")") << "\n";
     PrintSteps(report);
     std::cout << "maps and fit.json in " << args->out << "\n";
     return kExitOk;

@@ -45,8 +45,8 @@ std::string LeaveOutHint(FitParameter p, const ObservabilityContext& context) {
     case FitParameter::kSpecularTint:
       return "specular tint needs measurable highlights on a coloured base";
     case FitParameter::kAnisotropic:
-      return "anisotropy needs highlights seen from several azimuths, and is modelled along the image x axis only "
-             "(anisotropy_rotation 0): a stretch along y, such as a twill's warp, is outside the model";
+      return "anisotropy needs highlights seen from several azimuths (its direction, anisotropy_rotation, is "
+             "searched per cluster unless the fit options turn that off)";
     case FitParameter::kSpecular:
     case FitParameter::kRoughness:
       return "needs lights that put highlights on the sample (and has no effect on a metal)";

@@ -17,6 +17,7 @@
 
 #include "core/logging.h"
 #include "core/parallel.h"
+#include "fitting/shading_frame.h"
 
 namespace u3mscan::fitting {
 namespace {
@@ -38,6 +39,19 @@ constexpr double kFinalStdFactor = 2.0;
 // start of that test's refit (the twill preset's 0.2, well inside the bounds).
 constexpr double kAnisotropyAtBound = 0.01;
 constexpr double kAnisotropyProbeStart = 0.2;
+// Anisotropy rotation search (FitOptions::fit_anisotropy_rotation): the cost is scanned (no solve)
+// every kRotationScanStepDeg over the half turn (the stretch repeats every 180 degrees) with the
+// first solve's parameters and a stretch of at least kAnisotropyProbeStart; a turn closer to 0 than
+// kMinRotationDeg, or whose scanned cost is not below the solved unturned fit's, is no turn;
+// otherwise the scan's vertex is solved, and refined by parabolas
+// kRotationRefineStepDeg wide on the solved parameters (each followed by a solve) until the turn
+// moves less than kRotationConvergedDeg, at most kRotationRefineRounds times.
+constexpr int kRotationScanSteps = 12;
+constexpr double kRotationScanStepDeg = 180.0 / kRotationScanSteps;
+constexpr double kMinRotationDeg = 5.0;
+constexpr double kRotationRefineStepDeg = 3.0;
+constexpr int kRotationRefineRounds = 3;
+constexpr double kRotationConvergedDeg = 0.1;
 
 // Relative RMS residual above which a cluster counts as poorly explained: the option, or twice
 // the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
@@ -153,9 +167,10 @@ Eigen::Vector3d GeometryNormal(const FitContext& context, std::size_t index) {
   return {normals.at(0, row, col), normals.at(1, row, col), normals.at(2, row, col)};
 }
 
-// As GatherPixel, with the pixel's normal given (world frame, any length in the valid band).
-int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::Vector3d n, LocalObservation* out,
-                          float* ratios) {
+// As GatherPixel, with the pixel's normal given (world frame, any length in the valid band) and
+// its tangent turned by `rotation_deg` (the cluster's anisotropy rotation, shading_frame.h).
+int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::Vector3d n, double rotation_deg,
+                          LocalObservation* out, float* ratios) {
   const Stack& stack = *context.stack;
   const SurfaceGeometry& geometry = *context.geometry;
   const FitOptions& options = *context.options;
@@ -165,11 +180,7 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
   const double length = n.norm();
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return 0;
   n /= length;
-  // Tangent: world +x projected into the tangent plane (the anisotropy direction); +y if n ~ x.
-  Eigen::Vector3d t = Eigen::Vector3d::UnitX() - n.x() * n;
-  if (t.squaredNorm() < 1e-6) t = Eigen::Vector3d::UnitY() - n.y() * n;
-  t.normalize();
-  const Eigen::Vector3d b = n.cross(t);
+  const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
   const double h = geometry.height_mm.empty() ? 0.0 : geometry.height_mm.at(0, row, col);
   const Eigen::Vector3d point = stack.grid.PixelCentreInWorld(col, row, h);
 
@@ -181,8 +192,8 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
     if (!rgb.allFinite()) continue;
     const Eigen::Vector3d l_world = info.light->DirectionFrom(point);
     const Eigen::Vector3d v_world = (info.view->centre_in_world_mm - point).normalized();
-    const Eigen::Vector3d l(l_world.dot(t), l_world.dot(b), l_world.dot(n));
-    const Eigen::Vector3d v(v_world.dot(t), v_world.dot(b), v_world.dot(n));
+    const Eigen::Vector3d l = frame.ToLocal(l_world);
+    const Eigen::Vector3d v = frame.ToLocal(v_world);
     if (l.z() < options.min_cos || v.z() < options.min_cos) continue;
     const double e = o.irradiance.empty() ? info.light->RelativeIrradianceAt(point) : o.irradiance.at(0, row, col);
     if (!(e > 0.0) || !std::isfinite(e)) continue;
@@ -202,8 +213,9 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
   return count;
 }
 
+// The pixel's observations in its reconstruction normal's frame, the tangent unturned.
 int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
-  return GatherPixelWithNormal(context, index, GeometryNormal(context, index), out, ratios);
+  return GatherPixelWithNormal(context, index, GeometryNormal(context, index), 0.0, out, ratios);
 }
 
 // Refines the normal of one pixel with the full Principled model at the cluster's shared `params`
@@ -214,8 +226,8 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
 // field). Returns the refined unit normal, or the reconstruction's if no step lowers the cost.
 // `buffer` is scratch space of n_obs entries; `residuals` grows to 15 n_obs once per worker.
 Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
-                             const PixelCostSettings& settings, int iterations, LocalObservation* buffer,
-                             std::vector<double>& residuals) {
+                             double rotation_deg, const PixelCostSettings& settings, int iterations,
+                             LocalObservation* buffer, std::vector<double>& residuals) {
   const FitOptions& options = *context.options;
   Eigen::Vector3d n0 = GeometryNormal(context, index);
   const double length = n0.norm();
@@ -225,7 +237,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   if (t0.squaredNorm() < 1e-6) t0 = Eigen::Vector3d::UnitY() - n0.y() * n0;
   t0.normalize();
   const Eigen::Vector3d b0 = n0.cross(t0);
-  const int count0 = GatherPixelWithNormal(context, index, n0, buffer, nullptr);
+  const int count0 = GatherPixelWithNormal(context, index, n0, rotation_deg, buffer, nullptr);
   if (count0 < options.min_observations) return n0;
   const std::size_t m = 3 * static_cast<std::size_t>(count0);
   residuals.resize(5 * m);
@@ -237,7 +249,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   // Residuals at tilt (a, b); false when the set of usable observations changes.
   auto eval = [&](const Eigen::Vector2d& tilt, double* out, double* cost) {
     const Eigen::Vector3d n = (n0 + tilt(0) * t0 + tilt(1) * b0).normalized();
-    if (GatherPixelWithNormal(context, index, n, buffer, nullptr) != count0) return false;
+    if (GatherPixelWithNormal(context, index, n, rotation_deg, buffer, nullptr) != count0) return false;
     *cost = PixelResiduals(params, std::span<const LocalObservation>(buffer, count0), settings, out);
     return std::isfinite(*cost);
   };
@@ -333,6 +345,7 @@ ParameterMask Candidates(const FitOptions& options) {
 
 // The sampled pixels of one cluster, in one owned buffer (Ceres references it while solving).
 struct ClusterSamples {
+  double rotation_deg = 0.0;  // the tangent's turn the observations are expressed in (shading_frame.h)
   std::vector<LocalObservation> observations;
   std::vector<std::size_t> offsets;  // pixel p: observations[offsets[p], offsets[p + 1])
   std::vector<double> luminance_start;
@@ -415,6 +428,104 @@ SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& fr
   return outcome;
 }
 
+// `deg` in [0, 180): the anisotropic stretch is the same along t and -t.
+double WrapHalfTurn(double deg) {
+  const double r = std::fmod(deg, 180.0);
+  return r < 0.0 ? r + 180.0 : r;
+}
+
+// Turns every sample's tangent by `turn_deg` further about its normal (rotation_deg grows by it).
+void TurnSamples(ClusterSamples& samples, double turn_deg) {
+  for (LocalObservation& o : samples.observations) {
+    o.light_local = TurnTangent(o.light_local, turn_deg);
+    o.view_local = TurnTangent(o.view_local, turn_deg);
+  }
+  samples.rotation_deg = WrapHalfTurn(samples.rotation_deg + turn_deg);
+}
+
+// The anisotropy rotation search of FitOptions::fit_anisotropy_rotation, from the solution
+// `params` (with `outcome`) of the samples as they are: solves with the tangent turned by each
+// probe, then at the vertex of the parabola through the best probe and its two neighbours. A turn
+// is adopted when its anisotropic is off the bound and it lowers chi^2 (effective units) by more
+// than default_rejection_chi2: the samples are turned, `params` and `outcome` are its solve's.
+// Returns the chi^2 gain of the adopted turn, 0 when none was.
+double SearchAnisotropyRotation(ClusterSamples& samples, const ParameterMask& free, const FitOptions& options,
+                                ParameterVector& params, SolveOutcome& outcome, std::vector<double>& residuals) {
+  // Vertex (degrees) of the parabola through costs at turn - step, turn, turn + step.
+  auto vertex = [](double turn, double step, double below, double at, double above) {
+    const double curvature = below - 2.0 * at + above;
+    if (!(curvature > 0.0) || !std::isfinite(curvature)) return turn;
+    return WrapHalfTurn(turn + std::clamp(0.5 * step * (below - above) / curvature, -step, step));
+  };
+  // Cost of `p` with the samples turned by `turn` (a copy; the samples stay as they are).
+  ClusterSamples turned;
+  auto cost_turned = [&](double turn, const ParameterVector& p) {
+    turned = samples;
+    TurnSamples(turned, turn);
+    return SamplesCost(turned, turned.pixels(), p, options, residuals, free);
+  };
+  // 1. Scan without solving.
+  ParameterVector probe = params;
+  probe[kAnisotropic] = std::max(params[kAnisotropic], kAnisotropyProbeStart);
+  double scan[kRotationScanSteps];
+  int best = 0;
+  for (int k = 0; k < kRotationScanSteps; ++k) {
+    scan[k] = cost_turned(k * kRotationScanStepDeg, probe);
+    if (scan[k] < scan[best]) best = k;
+  }
+  double turn = vertex(best * kRotationScanStepDeg, kRotationScanStepDeg,
+                       scan[(best + kRotationScanSteps - 1) % kRotationScanSteps], scan[best],
+                       scan[(best + 1) % kRotationScanSteps]);
+  if (std::min(turn, 180.0 - turn) < kMinRotationDeg) return 0.0;
+  // Worth the solves only when the turned stretch, not yet solved, already explains the data better
+  // than the solved unturned fit (an isotropic lobe, or a weave's misfit, costs about the same
+  // stretched any way and is not).
+  const double cost_unturned = SamplesCost(samples, samples.pixels(), params, options, residuals, free);
+  if (!(scan[best] < cost_unturned)) return 0.0;
+  // 2. Solve there, refine the turn once with the solved parameters, and solve again if it moved.
+  ParameterVector solved = probe;
+  turned = samples;
+  TurnSamples(turned, turn);
+  SolveOutcome solve = SolveCluster(turned, free, options, solved);
+  if (!solve.usable) return 0.0;
+  for (int round = 0; round < kRotationRefineRounds; ++round) {
+    const double at = SamplesCost(turned, turned.pixels(), solved, options, residuals, free);
+    const double refined = vertex(turn, kRotationRefineStepDeg, cost_turned(turn - kRotationRefineStepDeg, solved), at,
+                                  cost_turned(turn + kRotationRefineStepDeg, solved));
+    const double moved = std::abs(refined - turn);
+    if (std::min(moved, 180.0 - moved) < kRotationConvergedDeg) break;
+    ParameterVector again = solved;
+    turned = samples;
+    TurnSamples(turned, refined);
+    const SolveOutcome next = SolveCluster(turned, free, options, again);
+    if (!next.usable) break;
+    solved = again;
+    solve = next;
+    turn = refined;
+  }
+  turned = samples;
+  TurnSamples(turned, turn);
+  // 3. Adopted only when it explains the data clearly better than the unturned solution.
+  if (!(solved[kAnisotropic] > kAnisotropyAtBound)) {
+    LogDebug() << "fitting: anisotropy turn " << turn << " deg not adopted: the solved stretch is at its bound";
+    return 0.0;
+  }
+  const double cost = SamplesCost(turned, turned.pixels(), solved, options, residuals, free);
+  ObservabilityContext context;
+  context.pixel_count = static_cast<int>(samples.pixels());
+  context.residual_count = static_cast<int>(3 * samples.observations.size());
+  context.cost = cost;
+  const double gain = EffectiveChi2Increase(cost, cost_unturned, context, options.observability);
+  if (!(gain > options.observability.default_rejection_chi2)) {
+    LogDebug() << "fitting: anisotropy turn " << turn << " deg not adopted: chi^2 -" << gain << " only";
+    return 0.0;
+  }
+  samples = std::move(turned);
+  params = solved;
+  outcome = solve;
+  return gain;
+}
+
 // Fisher information J^T J (weighted-residual units) of the samples at `params`, each pixel's
 // normal tilts marginalised when the options say so (observability.h), and the cost.
 Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& params, const FitOptions& options,
@@ -442,8 +553,10 @@ Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& 
   return fisher;
 }
 
-// The whole fit of one cluster: grid start, solve, observability, refit.
-ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options, double* observability_s) {
+// The whole fit of one cluster: grid start, solve, anisotropy rotation (when `search_rotation`;
+// otherwise the samples' own), observability, refit. The samples may come back turned.
+ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options, bool search_rotation,
+                      double* observability_s) {
   ClusterFit fit;
   fit.id = id;
   fit.sample_count = static_cast<int>(samples.pixels());
@@ -553,6 +666,14 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     LogError() << "fitting: cluster " << id << " solve failed (" << outcome.message << "); keeping its grid start";
     params = start;
   }
+  if (search_rotation && options.fit_anisotropy_rotation && candidates[kAnisotropic] && outcome.usable) {
+    const double gain = SearchAnisotropyRotation(samples, candidates, options, params, outcome, residuals);
+    if (gain > 0.0) {
+      LogInfo() << "fitting: cluster " << id << ": anisotropy rotation " << samples.rotation_deg << " deg (chi^2 -"
+                << gain << ")";
+    }
+  }
+  fit.anisotropy_rotation_deg = samples.rotation_deg;
   // Restart the colour's luminance iteration from this solution: later solves and the
   // observability step then need only `luminance_passes` (2) passes to be converged.
   for (std::size_t p = 0; p < samples.pixels(); ++p) {
@@ -662,7 +783,9 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   // a small std that means nothing there. Test it: refit anisotropy (and roughness) with the frame
   // turned by 90 degrees; if that explains the data clearly better, 0 is not the fabric's value.
   ParameterEstimate& aniso = fit.parameters[kAnisotropic];
-  if (candidates[kAnisotropic] && aniso.value < kAnisotropyAtBound) {
+  // A turn means nothing without a measured stretch: the parameters are then those of any turn.
+  if (!aniso.measured) fit.anisotropy_rotation_deg = 0.0;
+  if (!options.fit_anisotropy_rotation && candidates[kAnisotropic] && aniso.value < kAnisotropyAtBound) {
     ClusterSamples turned = samples;
     for (LocalObservation& o : turned.observations) {
       o.light_local = Eigen::Vector3d(o.light_local.y(), -o.light_local.x(), o.light_local.z());
@@ -1009,7 +1132,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         s.offsets.push_back(s.observations.size());
         s.luminance_start.push_back(0.2);
       }
-      model.clusters[c] = FitCluster(static_cast<int>(c), s, options, &observability_s[c]);
+      model.clusters[c] = FitCluster(static_cast<int>(c), s, options, /*search_rotation=*/true, &observability_s[c]);
       std::size_t saturated = 0, seen = 0;  // over the sampled pixels' observations
       for (std::size_t j = 0; j < take; ++j) {
         const std::size_t index = m[j * m.size() / take];
@@ -1031,6 +1154,8 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       int passes = 0;
       double change_deg = 0.0;
       for (int pass = 0; pass < options.normal_refinement_max_passes && s.pixels() > 0; ++pass) {
+        // The turn found by the first fit holds for the passes (they refine normals, not it).
+        const double rotation_deg = model.clusters[c].anisotropy_rotation_deg;
         ParameterVector params;
         ParameterMask free{};
         for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1039,6 +1164,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
           free[i] = e.measured;
         }
         ClusterSamples refined;
+        refined.rotation_deg = rotation_deg;
         refined.offsets.push_back(0);
         double change_sum = 0.0;
         int changed = 0;
@@ -1048,11 +1174,11 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
           const PixelCostSettings settings =
               Settings(options, params, free, std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color)));
           const Eigen::Vector3d n =
-              RefineNormal(context, index, params, settings, options.normal_iterations, buffer.data(), scratch);
+              RefineNormal(context, index, params, rotation_deg, settings, options.normal_iterations, buffer.data(), scratch);
           change_sum += std::atan2(n.cross(previous[j]).norm(), n.dot(previous[j])) * 180.0 / M_PI;
           ++changed;
           previous[j] = n;
-          const int count = GatherPixelWithNormal(context, index, n, buffer.data(), nullptr);
+          const int count = GatherPixelWithNormal(context, index, n, rotation_deg, buffer.data(), nullptr);
           if (count < options.min_observations) continue;
           refined.observations.insert(refined.observations.end(), buffer.begin(), buffer.begin() + count);
           refined.offsets.push_back(refined.observations.size());
@@ -1060,7 +1186,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         }
         s = std::move(refined);
         double pass_observability_s = 0.0;
-        model.clusters[c] = FitCluster(static_cast<int>(c), s, options, &pass_observability_s);
+        model.clusters[c] = FitCluster(static_cast<int>(c), s, options, /*search_rotation=*/false, &pass_observability_s);
         observability_s[c] += pass_observability_s;
         ++passes;
         change_deg = changed > 0 ? change_sum / changed : 0.0;
@@ -1182,6 +1308,9 @@ FitResult StartPixelMaps(const ClusterModel& model, const MetricGrid& grid) {
     result.parameter_maps[i] =
         Image(grid.width, grid.height, 1, static_cast<float>(FitParameterDefault(static_cast<FitParameter>(i))), grid.pitch_mm);
   }
+  const bool turned = std::any_of(model.clusters.begin(), model.clusters.end(),
+                                  [](const ClusterFit& c) { return c.anisotropy_rotation_deg != 0.0; });
+  if (turned) result.anisotropy_rotation_deg = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
   return result;
 }
 
@@ -1255,15 +1384,23 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
         const int c = NearestCluster(clustering, feature, kAppearanceFeatureCount, options.clustering);
         ++local_pixels[c];
         ++local_fitted;
+        const double rotation_deg = model.clusters[c].anisotropy_rotation_deg;
+        if (!result.anisotropy_rotation_deg.empty()) {
+          result.anisotropy_rotation_deg.at(0, row0 + row, col) = static_cast<float>(rotation_deg);
+        }
+        if (!refine_normals && rotation_deg != 0.0) {  // the cluster's turned tangent, same observations
+          count = GatherPixelWithNormal(context, index, GeometryNormal(context, index), rotation_deg,
+                                        buffers.observations.data(), nullptr);
+        }
         if (refine_normals) {
           // The pixel's normal with the full model at its cluster's parameters (as the cluster
           // samples' in FitClusterModel), then its colour and own parameters on that normal.
           const PixelCostSettings settings = Settings(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]);
-          const Eigen::Vector3d n = RefineNormal(context, index, cluster_params[c], settings,
+          const Eigen::Vector3d n = RefineNormal(context, index, cluster_params[c], rotation_deg, settings,
                                                  options.pixel_normal_iterations, buffers.observations.data(),
                                                  normal_scratch);
           // RefineNormal keeps the set of usable observations, so the count is unchanged.
-          count = GatherPixelWithNormal(context, index, n, buffers.observations.data(), nullptr);
+          count = GatherPixelWithNormal(context, index, n, rotation_deg, buffers.observations.data(), nullptr);
           for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
         }
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
@@ -1308,6 +1445,52 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   tally->refined += refined;
   for (int i = 0; i < kFitParameterCount; ++i) tally->variance_delta[i] += variance_delta[i];
   tally->seconds += Seconds(t);
+}
+
+// The anisotropy rotation's report, once the anisotropic map is decided: measured where that map
+// is (a turn means nothing without a stretch) and the search ran; constant when every cluster that
+// measures anisotropic has the same turn (the image is then dropped), else a texture.
+void FinishRotationMap(const FitOptions& options, FitResult* out) {
+  FitResult& result = *out;
+  MapReport& report = result.rotation_report;
+  report = MapReport();
+  const MapReport& stretch = result.report(FitParameter::kAnisotropic);
+  if (!stretch.measured || !options.fit_anisotropy_rotation) {
+    report.reason = !options.fit_anisotropy_rotation ? "held at its U3M default by the fit options"
+                                                     : "not measured: anisotropic is not measured";
+    result.anisotropy_rotation_deg = Image();
+    return;
+  }
+  report.measured = true;
+  report.reliable = stretch.reliable;
+  report.unreliable_reason = stretch.unreliable_reason;
+  const ClusterFit* largest = nullptr;
+  bool one_turn = true;
+  for (const ClusterFit& c : result.clusters) {
+    if (!c.parameters[kAnisotropic].measured || c.pixel_count == 0) continue;
+    if (largest != nullptr && c.anisotropy_rotation_deg != largest->anisotropy_rotation_deg) one_turn = false;
+    if (largest == nullptr || c.pixel_count > largest->pixel_count) largest = &c;
+  }
+  if (one_turn || result.anisotropy_rotation_deg.empty()) {
+    report.value = largest != nullptr ? largest->anisotropy_rotation_deg : 0.0;
+    report.constant = true;
+    report.reason = "one turn in every cluster that measures anisotropic";
+    result.anisotropy_rotation_deg = Image();
+    return;
+  }
+  double sum = 0.0, sum2 = 0.0;
+  std::int64_t n = 0;
+  const auto plane = result.anisotropy_rotation_deg.plane(0);
+  const auto ids = result.cluster_id.plane(0);
+  for (std::size_t j = 0; j < plane.size(); ++j) {
+    if (ids[j] < 0.0f) continue;
+    sum += plane[j];
+    sum2 += static_cast<double>(plane[j]) * plane[j];
+    ++n;
+  }
+  // As for the other maps, a texture's value is its pixel mean (what the U3M constant holds).
+  report.value = n > 0 ? sum / static_cast<double>(n) : 0.0;
+  report.spread = n > 0 ? std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - report.value * report.value)) : 0.0;
 }
 
 void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResult* out) {
@@ -1427,6 +1610,7 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
       for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);
     }
   }
+  FinishRotationMap(options, &result);
 }
 
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
@@ -1463,10 +1647,9 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
         Eigen::Vector3d n(geometry.normals.at(0, row, col), geometry.normals.at(1, row, col),
                           geometry.normals.at(2, row, col));
         n.normalize();
-        Eigen::Vector3d t = Eigen::Vector3d::UnitX() - n.x() * n;
-        if (t.squaredNorm() < 1e-6) t = Eigen::Vector3d::UnitY() - n.y() * n;
-        t.normalize();
-        const Eigen::Vector3d b = n.cross(t);
+        const double rotation_deg =
+            result.anisotropy_rotation_deg.empty() ? result.rotation_report.value : result.anisotropy_rotation_deg.at(0, row, col);
+        const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
         const double h = geometry.height_mm.empty() ? 0.0 : geometry.height_mm.at(0, row, col);
         const Eigen::Vector3d point = grid.PixelCentreInWorld(col, static_cast<int>(row), h);
         const Eigen::Vector3d lw = light.DirectionFrom(point);
@@ -1479,8 +1662,7 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
         }
         const Eigen::Vector3d c(result.base_color.at(0, row, col), result.base_color.at(1, row, col),
                                 result.base_color.at(2, row, col));
-        const Eigen::Vector3d rgb = RenderLocal(params, c, Eigen::Vector3d(lw.dot(t), lw.dot(b), lw.dot(n)),
-                                                Eigen::Vector3d(vw.dot(t), vw.dot(b), vw.dot(n)), e);
+        const Eigen::Vector3d rgb = RenderLocal(params, c, frame.ToLocal(lw), frame.ToLocal(vw), e);
         for (int ch = 0; ch < 3; ++ch) out.at(ch, row, col) = static_cast<float>(rgb(ch));
       }
     }
@@ -1501,6 +1683,13 @@ std::string FitResultToJson(const FitResult& result) {
       << ", \"reliable\": " << (m.reliable ? "true" : "false")
       << ", \"unreliable_reason\": " << JsonString(m.unreliable_reason) << "}";
   }
+  const MapReport& turn = result.rotation_report;
+  j << ",\n    \"anisotropy_rotation\": {\"u3m\": \"anisotropy_rotation\", \"unit\": \"deg\", \"measured\": "
+    << (turn.measured ? "true" : "false") << ", \"constant\": " << (turn.constant ? "true" : "false")
+    << ", \"texture\": " << (turn.measured && !turn.constant ? "true" : "false") << ", \"value\": " << JsonNumber(turn.value)
+    << ", \"spread\": " << JsonNumber(turn.spread) << ", \"reason\": " << JsonString(turn.reason)
+    << ", \"reliable\": " << (turn.reliable ? "true" : "false")
+    << ", \"unreliable_reason\": " << JsonString(turn.unreliable_reason) << "}";
   j << "\n  },\n  \"not_measured\": [";
   bool first = true;
   for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1520,7 +1709,8 @@ std::string FitResultToJson(const FitResult& result) {
       << ", \"final_cost\": " << JsonNumber(f.final_cost)
       << ", \"rms_relative_residual\": " << JsonNumber(f.rms_relative_residual)
       << ", \"saturated_share\": " << JsonNumber(f.saturated_share)
-      << ", \"highlight_share\": " << JsonNumber(f.highlight_share) << ", \"mean_base_color_linear\": ["
+      << ", \"highlight_share\": " << JsonNumber(f.highlight_share)
+      << ", \"anisotropy_rotation_deg\": " << JsonNumber(f.anisotropy_rotation_deg) << ", \"mean_base_color_linear\": ["
       << JsonNumber(f.mean_base_color(0)) << ", " << JsonNumber(f.mean_base_color(1)) << ", "
       << JsonNumber(f.mean_base_color(2)) << "], \"message\": " << JsonString(f.message) << ",\n     \"parameters\": {";
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1551,6 +1741,7 @@ std::string FitResultToJson(const FitResult& result) {
     << ", \"robust_scale_sigma\": " << JsonNumber(o.robust_loss.scale)
     << ", \"observability_max_std\": " << JsonNumber(o.observability.max_std)
     << ", \"observability_effective_pixels\": " << o.observability.effective_pixels
+    << ", \"fit_anisotropy_rotation\": " << (o.fit_anisotropy_rotation ? "true" : "false")
     << ", \"mode\": " << JsonString(FitModeName(o.mode)) << ", \"seed\": " << o.clustering.seed
     << "}\n}\n";
   return j.str();

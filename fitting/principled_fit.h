@@ -63,6 +63,13 @@ struct FitOptions {
   bool fit_sheen = true;
   bool fit_sheen_tint = true;
   bool fit_anisotropic = true;
+  // The direction of the anisotropic stretch per cluster (U3M anisotropy_rotation, shading_frame.h):
+  // with anisotropic a candidate, the first solve is repeated with the tangent turned by 45, 90 and
+  // 135 degrees, a parabola through the best and its neighbours gives one more angle, and the best
+  // turn is kept when it lowers chi^2 (effective units, observability.h) by more than
+  // observability.default_rejection_chi2; otherwise the cluster stays at 0. Off: the tangent is
+  // world +x projected, and a stretch along y is only flagged (docs/fitting.md, "Anisotropy").
+  bool fit_anisotropy_rotation = true;
   bool fit_metallic = false;
   // With fit_metallic off, a cluster the model explains poorly (mismatch_relative_rms) is refitted
   // with metallic free, and metallic is kept only if the metallic model then explains the data
@@ -155,6 +162,9 @@ struct ClusterFit {
   std::int64_t pixel_count = 0;
   int sample_count = 0;
   std::array<ParameterEstimate, kFitParameterCount> parameters;
+  // Turn of the tangent about the normal (degrees, [0, 180), shading_frame.h) the parameters
+  // belong to; 0 unless FitOptions::fit_anisotropy_rotation found a turned stretch.
+  double anisotropy_rotation_deg = 0.0;
   Eigen::Vector3d mean_base_color = Eigen::Vector3d::Zero();  // linear RGB over the samples
   double initial_cost = 0.0;         // Ceres cost at the grid start
   double final_cost = 0.0;           // Ceres cost at the solution
@@ -221,6 +231,11 @@ struct FitResult {
   // height from them, render with them).
   Image normals;
   std::array<MapReport, kFitParameterCount> maps;
+  // Anisotropy rotation (degrees, [0, 180), shading_frame.h) of every pixel: its cluster's. Empty
+  // when every cluster's is 0 or anisotropic is not measured; `rotation_report` says how to write
+  // U3M anisotropy_rotation (measured: constant or texture; else the default 0).
+  Image anisotropy_rotation_deg;
+  MapReport rotation_report;
   std::vector<ClusterFit> clusters;
   ConvergenceReport convergence;
   StageTimes times;

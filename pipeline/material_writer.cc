@@ -147,7 +147,7 @@ SideBuild BuildSide(const SideMaps& maps, const fs::path& staging, const Uniform
     if (choice.source == ParameterSource::kMeasured && !choice.map.empty()) {
       const std::string path = TexturePath(maps.side, choice.u3m_key);
       WriteTextureMap(choice.map, MapKind::kData, staging / path, kDataFormat);
-      *param = ScalarParam{true, choice.value, ScalarTexture{1.0, 0.0, TextureImageFor(choice.map, path)}};
+      *param = ScalarParam{true, choice.value, ScalarTexture{choice.texture_factor, 0.0, TextureImageFor(choice.map, path)}};
       result->files.push_back(path);
     } else {
       *param = ScalarParam{true, choice.value, std::nullopt};

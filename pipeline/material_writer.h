@@ -25,7 +25,8 @@ struct ScalarMapChoice {
   std::string u3m_key;       // "roughness", "specular_value", "sheen_tint", ...
   ParameterSource source = ParameterSource::kDefault;
   double value = 0.0;        // constant (default / uniform) or the fitted map's mean
-  Image map;                 // kMeasured only: 1 channel on the side's grid
+  Image map;                 // kMeasured only: 1 channel on the side's grid, value / texture_factor
+  double texture_factor = 1.0;  // the U3M texture's factor: map * factor is the value (rotation: 180 deg)
   std::string reason;
   std::string unreliable_reason;  // non-empty: written, but flagged unreliable (ParameterRecord)
 };

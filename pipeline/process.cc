@@ -36,6 +36,35 @@ constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
 
 
+// Texture factor of the anisotropy rotation (degrees): the stretch repeats every half turn, so a texture of
+// rotation / 180 in 0..1 with factor 180 holds every turn the fit finds.
+constexpr double kRotationTextureFactorDeg = 180.0;
+
+// U3M anisotropy_rotation from the fit's rotation report (fitting/shading_frame.h for the sense).
+ScalarMapChoice RotationChoice(const fitting::FitResult& fit, double pitch_mm) {
+  const fitting::MapReport& decision = fit.rotation_report;
+  ScalarMapChoice choice;
+  choice.u3m_key = "anisotropy_rotation";
+  choice.value = decision.value;
+  choice.reason = decision.reason;
+  if (decision.measured && !decision.reliable) choice.unreliable_reason = decision.unreliable_reason;
+  if (!decision.measured) {
+    choice.source = ParameterSource::kDefault;
+    choice.value = 0.0;
+    if (choice.reason.empty()) choice.reason = "not constrained by this capture";
+  } else if (decision.constant || fit.anisotropy_rotation_deg.empty()) {
+    choice.source = ParameterSource::kConstant;
+  } else {
+    choice.source = ParameterSource::kMeasured;
+    choice.reason = "one turn per cluster (texture)";
+    choice.map = fit.anisotropy_rotation_deg;
+    for (float& v : choice.map.data()) v = static_cast<float>(v / kRotationTextureFactorDeg);
+    choice.map.set_pitch_mm(pitch_mm);
+    choice.texture_factor = kRotationTextureFactorDeg;
+  }
+  return choice;
+}
+
 // --created: the u3m reader's RFC 3339 parser, restricted to UTC written with 'Z' (the form the
 // conventions ask writers for), so a material never gets a time the operator did not mean.
 std::optional<std::int64_t> ParseUtcTimestamp(const std::string& text) {
@@ -297,6 +326,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       }
       maps.scalars.push_back(std::move(choice));
     }
+    maps.scalars.push_back(RotationChoice(fit, grid.pitch_mm));
 
     // Quality figures of this side.
     const auto& ps = reconstruction.photometric_stereo;
@@ -344,6 +374,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         if (!fit.parameter_maps[p].empty()) d.fitted.emplace_back(fitting::FitParameterName(p), fit.parameter_maps[p]);
       }
       if (!fit.base_color.empty()) d.fitted.emplace_back("base_color", fit.base_color);
+      if (!fit.anisotropy_rotation_deg.empty()) d.fitted.emplace_back("anisotropy_rotation", fit.anisotropy_rotation_deg);
       debug.push_back(std::move(d));
     }
     request.sides.push_back(std::move(maps));

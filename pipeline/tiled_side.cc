@@ -111,7 +111,9 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   for (int i = 0; i < fitting::kFitParameterCount; ++i) {
     if (!fit.parameter_maps[i].empty()) band.parameter_maps[i] = CropRows(fit.parameter_maps[i], row0, rows);
   }
+  if (!fit.anisotropy_rotation_deg.empty()) band.anisotropy_rotation_deg = CropRows(fit.anisotropy_rotation_deg, row0, rows);
   band.maps = fit.maps;
+  band.rotation_report = fit.rotation_report;
   band.clusters = fit.clusters;
   band.options = fit.options;
   return band;

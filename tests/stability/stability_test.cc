@@ -265,6 +265,8 @@ void CheckDebugMap(const fs::path& path) {
     ExpectFiniteInRange(image, 0.0, 1.0, what);
   } else if (name == "residual") {
     ExpectFiniteInRange(image, 0.0, 1e6, what);
+  } else if (name == "anisotropy_rotation") {
+    ExpectFiniteInRange(image, 0.0, 180.0, what);  // degrees over the half turn the stretch repeats in
   } else {
     // confidence and every fitted Principled parameter live in 0..1.
     ExpectFiniteInRange(image, 0.0, 1.0, what);
