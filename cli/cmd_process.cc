@@ -2,6 +2,7 @@
 // calibration, reconstruction and fitting to complete U3M materials with reports.
 #include <iostream>
 #include <memory>
+#include <sstream>
 
 #include "cli/command.h"
 #include "cli/progress_bar.h"
@@ -20,6 +21,7 @@ struct ProcessArgs {
   std::string preset = "balanced";
   ProcessOptions options;
   std::string id, created, name;
+  std::string hold_out_lights;  // comma-separated light ids (ProcessOptions::hold_out_lights)
   double dpi = 0.0;
   int jobs = 1;
   int threads = 0;
@@ -54,6 +56,11 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
       ->check(CLI::IsMember({"clusters", "per-pixel"}));
   sub.add_flag("--no-cast-shadows", args->options.no_cast_shadows,
                "Do not mark cast shadows from the heights (on in every preset; for comparisons)");
+  // One string split here, not a CLI11 vector option: a vector would also swallow the capture
+  // paths that follow it on the command line.
+  sub.add_option("--hold-out-lights", args->hold_out_lights,
+                 "Light ids (the manifest's, comma-separated, e.g. L03,L09) left out of reconstruction and fit; "
+                 "the report gives the material's re-render error against their photographs");
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
                  "separately, of the RAW decode cache (docs/process.md, Large scans)")
@@ -82,6 +89,11 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
     if (args->dpi > 0.0) options.dpi = args->dpi;
     if (!args->id.empty()) options.id = args->id;
     if (!args->created.empty()) options.created = args->created;
+    if (!args->hold_out_lights.empty()) {
+      std::stringstream list(args->hold_out_lights);
+      for (std::string id; std::getline(list, id, ',');) options.hold_out_lights.push_back(id);
+      if (args->hold_out_lights.back() == ',') options.hold_out_lights.push_back("");  // "L03," names an empty id
+    }
     std::string why;
     if (!options.Check(&why)) {
       LogError() << why;

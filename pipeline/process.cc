@@ -12,6 +12,7 @@
 #include "core/system_stats.h"
 #include "pipeline/alpha_map.h"
 #include "pipeline/height_reliability.h"
+#include "pipeline/held_out_lights.h"
 #include "pipeline/material_writer.h"
 #include "pipeline/stages.h"
 #include "pipeline/tiled_side.h"
@@ -155,6 +156,12 @@ bool ProcessOptions::Check(std::string* why) const {
   if (!(max_memory_gib > 0.0 && max_memory_gib <= 1e6)) return fail("--max-memory must be a number of GiB in (0, 1e6]");
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
   if (!fit_mode.empty() && fit_mode != "clusters" && fit_mode != "per-pixel") return fail("--fit-mode must be clusters or per-pixel");
+  for (std::size_t i = 0; i < hold_out_lights.size(); ++i) {
+    if (hold_out_lights[i].empty()) return fail("--hold-out-lights must list light ids such as L03,L09");
+    for (std::size_t j = 0; j < i; ++j) {
+      if (hold_out_lights[j] == hold_out_lights[i]) return fail("--hold-out-lights names " + hold_out_lights[i] + " twice");
+    }
+  }
   return true;
 }
 
@@ -204,7 +211,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"debug_maps", options.debug_maps},
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
                     {"integrator", reconstruction::IntegratorName(stages.integration.method)},
-                    {"max_memory_gib", options.max_memory_gib}};
+                    {"max_memory_gib", options.max_memory_gib},
+                    {"hold_out_lights", options.hold_out_lights}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 
   PreparedCapture prepared = PrepareCapture(job.capture_dir, stages, &report, progress);
@@ -273,14 +281,30 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     bool fitted_normals = false;  // the written normals are the fit's (AdoptFittedNormals)
     Image residual;
     double residual_mean = 0.0;
+    std::optional<HeldOutCheck> held_out_check;
+    if (plan.bands > 1 && !options.hold_out_lights.empty()) {
+      throw InputError("command line", "--hold-out-lights",
+                       "a side processed in one band: the " + side + " side needs " + std::to_string(plan.bands) +
+                           " bands under --max-memory " + std::to_string(options.max_memory_gib) +
+                           " GiB (raise it to hold lights out)");
+    }
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
+      std::vector<Observation> held_out;
+      if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
       reconstruction = ReconstructSide(&stack, stages, alpha, &report, progress);
       fit = FitSide(stack, reconstruction, stages, &report, progress);
       const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
                                     [](const LightModel& l) { return l.type == LightType::kPoint; });
       fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
+      if (!held_out.empty()) {
+        held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
+        char detail[120];
+        std::snprintf(detail, sizeof detail, "%zu light(s) left out of the fit: relative RMSE %.2f %% against their photographs",
+                      held_out_check->lights.size(), 100.0 * held_out_check->relative_rmse);
+        report.steps.push_back({"held-out lights " + side, true, detail, held_out_check->seconds});
+      }
     } else {
       TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations, &report, progress);
       stack = std::move(tiled.sample);
@@ -343,6 +367,13 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                      {"fit_rms_relative_residual", weight > 0 ? rms / weight : 0.0},
                      {"mean_relative_render_residual", residual_mean},
                      {"fit_converged", fit.convergence.all_converged}};
+    if (held_out_check) {
+      nlohmann::json lights = nlohmann::json::array();
+      for (const HeldOutLightError& e : held_out_check->lights) {
+        lights.push_back({{"id", e.light_id}, {"relative_rmse", e.relative_rmse}, {"pixels", e.pixels}});
+      }
+      quality[side]["held_out_lights"] = {{"relative_rmse", held_out_check->relative_rmse}, {"lights", lights}};
+    }
 
     // Report thumbnails: a few input observations, every map, confidence and residual.
     const std::size_t n = stack.observations.size();

@@ -32,6 +32,10 @@ struct ProcessOptions {
   std::string integrator;               // dct | robust
   std::string fit_mode;                 // clusters | per-pixel (fitting::FitMode)
   bool no_cast_shadows = false;         // do not mark cast shadows (on in every preset; for comparisons)
+  // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
+  // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need
+  // bands (--max-memory) are refused with them.
+  std::vector<std::string> hold_out_lights;
   // Memory budget of one band's stack, GiB: a side whose whole stack (model in pipeline/tiles.h)
   // needs more is processed in bands of rows (docs/process.md, "Large scans: memory and time").
   double max_memory_gib = 4.0;          // = kDefaultStackBudgetGiB

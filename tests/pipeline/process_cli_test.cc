@@ -13,6 +13,8 @@
 #include <sstream>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "tests/support/bump_scene.h"
@@ -39,7 +41,13 @@ int RunShell(const std::string& command) {
   return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
 }
 
-std::string Quote(const fs::path& path) { return "'" + path.string() + "'"; }
+// Single-quoted for /bin/sh (built by appending: GCC 12 warns falsely, -Wrestrict, on "'" + s + "'").
+std::string Quote(const fs::path& path) {
+  std::string quoted = "'";
+  quoted += path.string();
+  quoted += "'";
+  return quoted;
+}
 
 class ProcessCli : public ::testing::Test {
  protected:
@@ -96,6 +104,39 @@ TEST_F(ProcessCli, RerunWithFixedIdAndTimeWritesTheSameMaterial) {
     EXPECT_EQ(ReadFile(entry.path()), ReadFile(root_ / "run2" / "textures" / entry.path().filename()))
         << entry.path().filename();
   }
+}
+
+TEST_F(ProcessCli, HoldOutLightsAreParsedAndTheirErrorIsReported) {
+  // `process --quiet --preset fast --hold-out-lights IDS captures/a -o OUT` (the list before the
+  // capture: it must not swallow the positional path).
+  auto command = [&](const std::string& ids, const std::string& out) {
+    std::string c = Exe();
+    c += " process --quiet --preset fast --hold-out-lights ";
+    c += ids;
+    c += " ";
+    c += Quote(root_ / "captures" / "a");
+    c += " -o ";
+    c += Quote(root_ / out);
+    return c;
+  };
+  ASSERT_EQ(RunShell(command("L02,L05", "held_out")), 0);
+  std::ifstream in(root_ / "held_out" / "report.json");
+  const nlohmann::json report = nlohmann::json::parse(in);
+  EXPECT_EQ(report["options"]["hold_out_lights"], nlohmann::json::array({"L02", "L05"}));
+  const nlohmann::json& held = report["quality"]["front"]["held_out_lights"];
+  ASSERT_EQ(held["lights"].size(), 2u) << report["quality"].dump();
+  EXPECT_EQ(held["lights"][0]["id"], "L02");
+  EXPECT_EQ(held["lights"][1]["id"], "L05");
+  EXPECT_GE(held["relative_rmse"].get<double>(), 0.0);
+  // The same light twice, or an empty id, is bad usage: exit 2, nothing written.
+  for (const char* ids : {"L02,L02", "L02,"}) {
+    EXPECT_EQ(RunShell(command(ids, "held_bad_usage")), 2) << ids;
+    EXPECT_FALSE(fs::exists(root_ / "held_bad_usage")) << ids;
+  }
+  // A light the capture does not have: that capture fails (exit 1), nothing written for it.
+  EXPECT_EQ(RunShell(command("L42", "held_unknown")), 1);
+  EXPECT_FALSE(fs::exists(root_ / "held_unknown" / "report.json"));
+  EXPECT_FALSE(fs::exists(root_ / "held_unknown" / "a.u3m"));
 }
 
 TEST_F(ProcessCli, PackageAndSchemaOptions) {
