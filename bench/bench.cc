@@ -150,6 +150,8 @@ void ReadReport(const fs::path& report_path, BenchRow* row) {
   for (const json& parameter : report.value("parameters", json::array())) {
     if (!parameter.value("reliable", true)) row->unreliable.push_back(parameter.value("name", std::string()));
   }
+  const json held = report.value("/quality/front/held_out_lights/relative_rmse"_json_pointer, json());
+  if (held.is_number()) row->held_out_rmse = held.get<double>();
   StageSeconds& s = row->stages;
   // Per-light calibration steps are counted, not listed ("calibration: light x12").
   int lights_skipped = 0;
@@ -187,6 +189,7 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   if (!c.solver.empty()) args.insert(args.end(), {"--solver", c.solver});
   if (!c.integrator.empty()) args.insert(args.end(), {"--integrator", c.integrator});
   if (!c.fit_mode.empty()) args.insert(args.end(), {"--fit-mode", c.fit_mode});
+  if (!c.hold_out_lights.empty()) args.insert(args.end(), {"--hold-out-lights", c.hold_out_lights});
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);
@@ -271,6 +274,11 @@ std::string BenchCase::RunId() const {
   if (!solver.empty()) id += "_ps-" + solver;
   if (!integrator.empty()) id += "_int-" + integrator;
   if (!fit_mode.empty()) id += "_fit-" + fit_mode;
+  if (!hold_out_lights.empty()) {
+    std::string ids = hold_out_lights;
+    std::replace(ids.begin(), ids.end(), ',', '-');
+    id += "_holdout-" + ids;
+  }
   return id;
 }
 
@@ -300,42 +308,50 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
       for (const auto& preset : presets) {
         if (quick && scene == "velvet" && (preset != "fast" || std::string(rig) != "distant")) continue;
         if (quick && preset == "best" && std::string(rig) == "near") continue;  // best costs 2x balanced
-        add({scene, rig, base, 0, true, preset, "", "", "matrix", ""});
+        add({scene, rig, base, 0, true, preset, "", "", "matrix", "", ""});
       }
     }
   }
   // Oblique camera (top + oblique view): sheen becomes measurable. Full: velvet, every preset;
   // quick: plain, fast (against plain/near/fast: the time the second view costs).
   if (quick) {
-    add({"plain", "oblique", base, 0, true, "fast", "", "", "matrix", ""});
+    add({"plain", "oblique", base, 0, true, "fast", "", "", "matrix", "", ""});
   } else {
-    for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix", ""});
+    for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix", "", ""});
   }
   // Methods on the same captures: ls vs robust photometric stereo, dct vs robust integration,
   // clusters vs per-pixel fitting, against the balanced run (robust + dct + per-pixel).
   for (const char* rig : {"distant", "near"}) {
     if (quick && std::string(rig) == "near") continue;
-    add({"plain", rig, base, 0, true, "balanced", "ls", "", "methods", ""});
-    add({"plain", rig, base, 0, true, "balanced", "", "robust", "methods", ""});
-    add({"plain", rig, base, 0, true, "balanced", "", "", "methods", "clusters"});
+    add({"plain", rig, base, 0, true, "balanced", "ls", "", "methods", "", ""});
+    add({"plain", rig, base, 0, true, "balanced", "", "robust", "methods", "", ""});
+    add({"plain", rig, base, 0, true, "balanced", "", "", "methods", "clusters", ""});
   }
   // Fit mode on a woven scene with per-thread variation (full matrix: where a texture can pay off).
-  if (!quick) add({"twill", "distant", base, 0, true, "balanced", "", "", "methods", "clusters"});
+  if (!quick) add({"twill", "distant", base, 0, true, "balanced", "", "", "methods", "clusters", ""});
+  // Held out: four of the 16 lights kept out of the fit and re-rendered against their photographs
+  // (the held-out re-render on the captured images, beside the truth-based figure).
+  const std::string held_out = "L02,L05,L09,L14";
+  add({"plain", "distant", base, 0, true, quick ? "fast" : "balanced", "", "", "held-out", "", held_out});
+  if (!quick) {
+    add({"plain", "near", base, 0, true, "balanced", "", "", "held-out", "", held_out});
+    add({"satin", "distant", base, 0, true, "balanced", "", "", "held-out", "", held_out});
+  }
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).
-  add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", ""});
-  if (!quick) add({"plain", "near", base, 0, false, "balanced", "", "", "needs-less", ""});
+  add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", "", ""});
+  if (!quick) add({"plain", "near", base, 0, false, "balanced", "", "", "needs-less", "", ""});
   // Megapixel axis (with the base size of the matrix).
   for (int size : quick ? std::vector<int>{80} : std::vector<int>{256, 512}) {
     for (const char* preset : {"fast", "balanced"}) {
       if (quick && std::string(preset) != "fast") continue;
-      add({"plain", "distant", size, 0, true, preset, "", "", "size", ""});
+      add({"plain", "distant", size, 0, true, preset, "", "", "size", "", ""});
     }
   }
   // Lights axis (the rigs have 16).
   for (int lights : quick ? std::vector<int>{8} : std::vector<int>{6, 8, 12}) {
     for (const char* preset : {"fast", "balanced"}) {
       if (quick && std::string(preset) != "fast") continue;
-      add({"plain", "distant", base, lights, true, preset, "", "", "lights", ""});
+      add({"plain", "distant", base, lights, true, preset, "", "", "lights", "", ""});
     }
   }
   return cases;
@@ -347,7 +363,7 @@ std::vector<std::string> BenchCsvColumns() {
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
           "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "unreliable", "error"};
+          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"};
 }
 
 void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
@@ -367,6 +383,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
         v(e.height_rmse_mm, 5), v(e.height_rmse_percent, 2)};
     for (int p = 0; p < 7; ++p) cells.push_back(ParameterCell(r, p));
     cells.push_back(v(e.rerender_relative_rmse, 4));
+    cells.push_back(ok && std::isfinite(r.held_out_rmse) ? Fixed(r.held_out_rmse, 4) : std::string());
     cells.push_back(Join(r.unreliable, "; "));
     cells.push_back(r.error);
     for (auto& cell : cells) cell = Csv(cell);
@@ -428,7 +445,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
   auto find = [&](const std::string& capture, const std::string& preset) -> const BenchRow* {
     for (const BenchRow& r : rows) {
       if (r.c.CaptureId() == capture && r.c.preset == preset && r.c.solver.empty() && r.c.integrator.empty() &&
-          r.c.fit_mode.empty() && r.status == "ok") {
+          r.c.fit_mode.empty() && r.c.hold_out_lights.empty() && r.status == "ok") {
         return &r;
       }
     }
@@ -462,6 +479,19 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     };
     if (base) line(*base);
     line(r);
+  }
+
+  // Held out: the held-out photographs' error against the truth-based re-render of the same run
+  // and of the run with every light.
+  s << "\n## Held-out photographs (lights left out of the fit)\n\n| capture | preset | held-out lights | total s | "
+       "held-out photographs re-render % | truth re-render % (this run) | truth re-render % (every light) |\n"
+       "|---|---|---|---|---|---|---|\n";
+  for (const BenchRow& r : rows) {
+    if (r.c.group != "held-out" || r.status != "ok") continue;
+    const BenchRow* all = find(r.c.CaptureId(), r.c.preset);
+    s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << r.c.hold_out_lights << " | " << Fixed(r.total_s, 2)
+      << " | " << Fixed(100.0 * r.held_out_rmse, 2) << " | " << Fixed(100.0 * r.evaluation.rerender_relative_rmse, 2)
+      << " | " << (all ? Fixed(100.0 * all->evaluation.rerender_relative_rmse, 2) : std::string("-")) << " |\n";
   }
 
   // Needs less: steps skipped and the time they save.

@@ -16,6 +16,7 @@
 // lights axis. --quick shrinks every axis.
 
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,8 @@ struct BenchCase {
   std::string integrator;     // "" = the preset's
   std::string group;          // why the case is in the matrix: matrix | methods | needs-less | size | lights
   std::string fit_mode;       // "" = the preset's; clusters | per-pixel (u3mscan process --fit-mode)
+  // "" = none; light ids, comma-separated (u3mscan process --hold-out-lights): group "held-out"
+  std::string hold_out_lights;
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };
@@ -54,6 +57,9 @@ struct BenchRow {
   double total_s = 0;          // report.json /total_seconds
   double peak_rss_mib = 0;     // child's max RSS (wait4)
   StageSeconds stages;
+  // Re-render error against the photographs of the held-out lights (report.json
+  // /quality/front/held_out_lights/relative_rmse); NaN when the case holds none out.
+  double held_out_rmse = std::numeric_limits<double>::quiet_NaN();
   std::vector<std::string> skipped;  // names of steps that did not run
   Evaluation evaluation;
 };

@@ -150,13 +150,15 @@ TEST(BenchWriters, MarkdownAndPlots) {
   fs::remove_all(dir);
 }
 
-TEST(BenchMatrix, QuickCoversPresetsRigsMethodsAndNeedsLess) {
+TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   BenchOptions options;
   options.quick = true;
   const auto cases = BenchMatrix(options);
   std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
+  int held_out = 0;
   for (const auto& c : cases) {
+    held_out += !c.hold_out_lights.empty() && c.group == "held-out";
     presets.insert(c.preset);
     rigs.insert(c.rig);
     if (!c.solver.empty()) solvers.insert(c.solver);
@@ -171,6 +173,7 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsAndNeedsLess) {
   EXPECT_EQ(integrators, std::set<std::string>{"robust"});
   EXPECT_EQ(fit_modes, std::set<std::string>{"clusters"}) << "clusters against the balanced run's per-pixel fit";
   EXPECT_TRUE(without_calibration);
+  EXPECT_EQ(held_out, 1) << "one run with lights held out of the fit";
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());
 }

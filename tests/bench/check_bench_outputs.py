@@ -15,7 +15,7 @@ EXPECTED_COLUMNS = [
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
     "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "unreliable", "error"]
+    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"]
 PLOTS = ["error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"]
 
 
@@ -53,9 +53,14 @@ def main():
         fail("fit mode comparison missing")
     if not any(r["calibration_frames"] == "no" for r in records):
         fail("no capture without calibration frames")
+    held_out = [r for r in records if r["group"] == "held-out"]
+    if not held_out or not all(0.0 <= float(r["held_out_rel_rmse"]) < 1.0 for r in held_out):
+        fail(f"held-out run missing or its held_out_rel_rmse out of range: {held_out}")
+    if any(r["held_out_rel_rmse"] for r in records if r["group"] != "held-out"):
+        fail("held_out_rel_rmse filled for a run that held no light out")
     md = (out / "bench.md").read_text()
     for heading in ("## Every run", "## Presets", "## Methods on the same capture",
-                    "### Fit: clusters vs per-pixel", "## Scenes that need less"):
+                    "### Fit: clusters vs per-pixel", "## Held-out photographs", "## Scenes that need less"):
         if heading not in md:
             fail(f"bench.md lacks {heading}")
     for plot in PLOTS:
