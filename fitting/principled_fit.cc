@@ -233,10 +233,10 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   const double length = n0.norm();
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return n0;
   n0 /= length;
-  Eigen::Vector3d t0 = Eigen::Vector3d::UnitX() - n0.x() * n0;
-  if (t0.squaredNorm() < 1e-6) t0 = Eigen::Vector3d::UnitY() - n0.y() * n0;
-  t0.normalize();
-  const Eigen::Vector3d b0 = n0.cross(t0);
+  // The two tilt directions: the unturned shading frame's tangent and bitangent.
+  const ShadingFrame axes = MakeShadingFrame(n0);
+  const Eigen::Vector3d& t0 = axes.tangent;
+  const Eigen::Vector3d& b0 = axes.bitangent;
   const int count0 = GatherPixelWithNormal(context, index, n0, rotation_deg, buffer, nullptr);
   if (count0 < options.min_observations) return n0;
   const std::size_t m = 3 * static_cast<std::size_t>(count0);
@@ -443,11 +443,10 @@ void TurnSamples(ClusterSamples& samples, double turn_deg) {
   samples.rotation_deg = WrapHalfTurn(samples.rotation_deg + turn_deg);
 }
 
-// The anisotropy rotation search of FitOptions::fit_anisotropy_rotation, from the solution
-// `params` (with `outcome`) of the samples as they are: solves with the tangent turned by each
-// probe, then at the vertex of the parabola through the best probe and its two neighbours. A turn
-// is adopted when its anisotropic is off the bound and it lowers chi^2 (effective units) by more
-// than default_rejection_chi2: the samples are turned, `params` and `outcome` are its solve's.
+// The anisotropy rotation search of FitOptions::fit_anisotropy_rotation (steps at kRotationScanSteps
+// above), from the solution `params` (with `outcome`) of the samples as they are. A turn is adopted
+// when its anisotropic is off the bound and it lowers chi^2 (effective units) by more than
+// default_rejection_chi2: the samples are turned, `params` and `outcome` are its solve's.
 // Returns the chi^2 gain of the adopted turn, 0 when none was.
 double SearchAnisotropyRotation(ClusterSamples& samples, const ParameterMask& free, const FitOptions& options,
                                 ParameterVector& params, SolveOutcome& outcome, std::vector<double>& residuals) {
@@ -482,7 +481,8 @@ double SearchAnisotropyRotation(ClusterSamples& samples, const ParameterMask& fr
   // stretched any way and is not).
   const double cost_unturned = SamplesCost(samples, samples.pixels(), params, options, residuals, free);
   if (!(scan[best] < cost_unturned)) return 0.0;
-  // 2. Solve there, refine the turn once with the solved parameters, and solve again if it moved.
+  // 2. Solve there, then refine the turn by parabolas on the solved parameters, solving again at
+  // each new turn, until it stops moving.
   ParameterVector solved = probe;
   turned = samples;
   TurnSamples(turned, turn);
@@ -787,10 +787,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   if (!aniso.measured) fit.anisotropy_rotation_deg = 0.0;
   if (!options.fit_anisotropy_rotation && candidates[kAnisotropic] && aniso.value < kAnisotropyAtBound) {
     ClusterSamples turned = samples;
-    for (LocalObservation& o : turned.observations) {
-      o.light_local = Eigen::Vector3d(o.light_local.y(), -o.light_local.x(), o.light_local.z());
-      o.view_local = Eigen::Vector3d(o.view_local.y(), -o.view_local.x(), o.view_local.z());
-    }
+    TurnSamples(turned, 90.0);
     ParameterMask mask = decision.measured;
     mask[kAnisotropic] = true;
     ParameterMask free{};

@@ -37,31 +37,35 @@ constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
 
 
-// Texture factor of the anisotropy rotation (degrees): the stretch repeats every half turn, so a texture of
-// rotation / 180 in 0..1 with factor 180 holds every turn the fit finds.
+// Texture factor of the anisotropy rotation (degrees): the stretch repeats every half turn, so a
+// texture of rotation / 180 in 0..1 with factor 180 holds every turn the fit finds.
 constexpr double kRotationTextureFactorDeg = 180.0;
 
-// U3M anisotropy_rotation from the fit's rotation report (fitting/shading_frame.h for the sense).
-ScalarMapChoice RotationChoice(const fitting::FitResult& fit, double pitch_mm) {
-  const fitting::MapReport& decision = fit.rotation_report;
+// The writer's choice for one fitted map from the fit's decision: the U3M default when not
+// measured, a constant when uniform (or without an image), else the texture `map`, written as
+// map / texture_factor with that factor. A decision without a reason gets the default wording.
+ScalarMapChoice ChoiceFromDecision(const char* u3m_key, const fitting::MapReport& decision, const Image& map,
+                                   double pitch_mm, const char* texture_reason, double texture_factor = 1.0) {
   ScalarMapChoice choice;
-  choice.u3m_key = "anisotropy_rotation";
+  choice.u3m_key = u3m_key;
   choice.value = decision.value;
   choice.reason = decision.reason;
   if (decision.measured && !decision.reliable) choice.unreliable_reason = decision.unreliable_reason;
   if (!decision.measured) {
     choice.source = ParameterSource::kDefault;
-    choice.value = 0.0;
     if (choice.reason.empty()) choice.reason = "not constrained by this capture";
-  } else if (decision.constant || fit.anisotropy_rotation_deg.empty()) {
+  } else if (decision.constant || map.empty()) {
     choice.source = ParameterSource::kConstant;
+    if (choice.reason.empty()) choice.reason = "uniform within noise";
   } else {
     choice.source = ParameterSource::kMeasured;
-    choice.reason = "one turn per cluster (texture)";
-    choice.map = fit.anisotropy_rotation_deg;
-    for (float& v : choice.map.data()) v = static_cast<float>(v / kRotationTextureFactorDeg);
+    if (choice.reason.empty()) choice.reason = texture_reason;
+    choice.map = map;
+    if (texture_factor != 1.0) {
+      for (float& v : choice.map.data()) v = static_cast<float>(v / texture_factor);
+    }
     choice.map.set_pitch_mm(pitch_mm);
-    choice.texture_factor = kRotationTextureFactorDeg;
+    choice.texture_factor = texture_factor;
   }
   return choice;
 }
@@ -330,27 +334,13 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.alpha = alpha;
     maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
-      const fitting::MapReport& decision = fit.maps[p];
-      ScalarMapChoice choice;
-      choice.u3m_key = kU3mKeyOfFitParameter[p];
-      choice.value = decision.value;
-      choice.reason = decision.reason;
-      if (decision.measured && !decision.reliable) choice.unreliable_reason = decision.unreliable_reason;
-      if (!decision.measured) {
-        choice.source = ParameterSource::kDefault;
-        if (choice.reason.empty()) choice.reason = "not constrained by this capture";
-      } else if (decision.constant || fit.parameter_maps[p].empty()) {
-        choice.source = ParameterSource::kConstant;
-        if (choice.reason.empty()) choice.reason = "uniform within noise";
-      } else {
-        choice.source = ParameterSource::kMeasured;
-        if (choice.reason.empty()) choice.reason = "fitted per pixel: varies more than its noise (texture)";
-        choice.map = fit.parameter_maps[p];
-        choice.map.set_pitch_mm(grid.pitch_mm);
-      }
-      maps.scalars.push_back(std::move(choice));
+      maps.scalars.push_back(ChoiceFromDecision(kU3mKeyOfFitParameter[p], fit.maps[p], fit.parameter_maps[p], grid.pitch_mm,
+                                                "fitted per pixel: varies more than its noise (texture)"));
     }
-    maps.scalars.push_back(RotationChoice(fit, grid.pitch_mm));
+    // The rotation of the anisotropic stretch (fitting/shading_frame.h for its sense).
+    maps.scalars.push_back(ChoiceFromDecision("anisotropy_rotation", fit.rotation_report, fit.anisotropy_rotation_deg,
+                                              grid.pitch_mm, "one turn per cluster (texture)",
+                                              kRotationTextureFactorDeg));
 
     // Quality figures of this side.
     const auto& ps = reconstruction.photometric_stereo;
