@@ -157,12 +157,31 @@ int KernelReach(RectifyInterpolation interpolation) {
   return 0;
 }
 
-void RemapPlane(const cv::Mat& source, cv::Mat destination, const RectificationMap& map, double prefilter_sigma,
-                RectifyInterpolation interpolation) {
+// Integral of the unit tent max(0, 1 - |x|) from -inf to x.
+double TentIntegral(double x) {
+  if (x <= -1.0) return 0.0;
+  if (x <= 0.0) return 0.5 * (x + 1.0) * (x + 1.0);
+  if (x < 1.0) return 1.0 - 0.5 * (1.0 - x) * (1.0 - x);
+  return 1.0;
+}
+
+// Below this box width (camera px) the filter is the identity to within 1e-4 per tap.
+constexpr double kMinBoxWidthPx = 1e-3;
+
+double BoxWidthPx(double camera_px_per_grid_px) {
+  const double s = camera_px_per_grid_px;
+  return s > 1.0 ? std::sqrt(s * s - 1.0) : 0.0;
+}
+
+void RemapPlane(const cv::Mat& source, cv::Mat destination, const RectificationMap& map, RectifyInterpolation interpolation) {
   const cv::Mat map_x = internal::PlaneView(map.map, 0), map_y = internal::PlaneView(map.map, 1);
-  cv::Mat blurred;
-  if (prefilter_sigma > 0.0) cv::GaussianBlur(source, blurred, cv::Size(0, 0), prefilter_sigma, prefilter_sigma, cv::BORDER_REFLECT);
-  const cv::Mat& input = prefilter_sigma > 0.0 ? blurred : source;
+  const std::vector<float> taps = FootprintPrefilterKernel(map.camera_px_per_grid_px);
+  cv::Mat filtered;
+  if (taps.size() > 1) {
+    const cv::Mat kernel(1, static_cast<int>(taps.size()), CV_32F, const_cast<float*>(taps.data()));
+    cv::sepFilter2D(source, filtered, CV_32F, kernel, kernel, cv::Point(-1, -1), 0.0, cv::BORDER_REFLECT);
+  }
+  const cv::Mat& input = taps.size() > 1 ? filtered : source;
   if (interpolation == RectifyInterpolation::kLinear) {
     // In-view grid pixels ([0, W-1] x [0, H-1]) never reach beyond the frame with bilinear weights.
     cv::remap(input, destination, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
@@ -174,19 +193,36 @@ void RemapPlane(const cv::Mat& source, cv::Mat destination, const RectificationM
   cv::max(destination, 0.0, destination);
 }
 
-double PrefilterSigma(const RectificationMap& map) {
-  // Beyond 1.5 camera pixels per grid pixel, blur to the grid's Nyquist limit first.
-  const double s = map.camera_px_per_grid_px;
-  return s > 1.5 ? 0.5 * std::sqrt(s * s - 1.0) : 0.0;
+}  // namespace
+
+std::vector<float> FootprintPrefilterKernel(double camera_px_per_grid_px) {
+  const double w = BoxWidthPx(camera_px_per_grid_px);
+  if (!(w >= kMinBoxWidthPx)) return {1.0f};
+  // Tap q: the mean over x in [-w/2, w/2] of the tent centred on q (the image between camera pixel
+  // centres is the linear interpolation of their values).
+  const int reach = FootprintPrefilterReach(camera_px_per_grid_px);
+  std::vector<float> taps(static_cast<std::size_t>(2 * reach + 1));
+  double sum = 0.0;
+  for (int q = -reach; q <= reach; ++q) {
+    const double t = (TentIntegral(q + 0.5 * w) - TentIntegral(q - 0.5 * w)) / w;
+    taps[static_cast<std::size_t>(q + reach)] = static_cast<float>(t);
+    sum += t;
+  }
+  for (float& t : taps) t = static_cast<float>(t / sum);
+  return taps;
 }
 
-}  // namespace
+int FootprintPrefilterReach(double camera_px_per_grid_px) {
+  const double w = BoxWidthPx(camera_px_per_grid_px);
+  if (!(w >= kMinBoxWidthPx)) return 0;
+  // The tent centred on q overlaps [-w/2, w/2] while |q| < 1 + w/2.
+  return static_cast<int>(std::ceil(1.0 + 0.5 * w)) - 1;
+}
 
 Image RectifyImage(const Image& image, const RectificationMap& map) {
   Image out(map.grid.width, map.grid.height, image.channels(), 0.0f, map.grid.pitch_mm);
-  const double sigma = PrefilterSigma(map);
   for (int c = 0; c < image.channels(); ++c) {
-    RemapPlane(internal::PlaneView(image, c), internal::PlaneView(out, c), map, sigma, map.interpolation);
+    RemapPlane(internal::PlaneView(image, c), internal::PlaneView(out, c), map, map.interpolation);
   }
   return out;
 }
@@ -208,8 +244,7 @@ RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map) {
       cv::dilate(saturated_f, saturated_f, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1)));
     }
     cv::Mat on_grid(map.grid.height, map.grid.width, CV_32F);
-    const double sigma = PrefilterSigma(map);
-    RemapPlane(saturated_f, on_grid, map, sigma > 0.0 ? sigma : 0.0, RectifyInterpolation::kLinear);
+    RemapPlane(saturated_f, on_grid, map, RectifyInterpolation::kLinear);
     for (int row = 0; row < on_grid.rows; ++row) {
       const float* s = on_grid.ptr<float>(row);
       for (int col = 0; col < on_grid.cols; ++col) {

@@ -56,8 +56,20 @@ struct RectifiedFrame {
   std::vector<std::uint8_t> flags;    // ObservationFlag bits (kSaturated, kOutOfView)
 };
 
-// Resamples `frame` (camera pixels) onto the map's grid (map.interpolation; when the grid is
-// coarser than the camera by more than 1.5x, a Gaussian pre-filter against aliasing).
+// Footprint pre-filter, applied to the camera image before the interpolation when the grid is
+// coarser than the camera (s = camera_px_per_grid_px > 1). A finished map pixel holds the fabric
+// averaged over its footprint, s x s camera pixels; a camera pixel has already averaged over 1 x 1.
+// The filter is a box of width w = sqrt(s^2 - 1) camera px over the linearly interpolated image
+// (separable, the same along rows and columns), so that the camera pixel's spread plus the box's
+// equals the footprint's (variances 1/12 + w^2/12 = s^2/12). It keeps the contrast of threads two
+// to four grid pixels wide that a Gaussian at the grid's Nyquist limit (sigma = 0.5 sqrt(s^2 - 1),
+// three times the variance) blurred away; docs/calibration.md has the measurements.
+// Taps q = -reach .. reach, symmetric, summing to 1; {1} (reach 0) for s <= 1.
+std::vector<float> FootprintPrefilterKernel(double camera_px_per_grid_px);
+int FootprintPrefilterReach(double camera_px_per_grid_px);
+
+// Resamples `frame` (camera pixels) onto the map's grid (map.interpolation, after the footprint
+// pre-filter when the grid is coarser than the camera).
 RectifiedFrame Rectify(const DecodedFrame& frame, const RectificationMap& map);
 // The same for any image (all channels), without flags.
 Image RectifyImage(const Image& image, const RectificationMap& map);

@@ -36,13 +36,11 @@ void ApplyDarkAmbientRows(const DarkAmbient& dark_ambient, const FrameSpec& spec
   }
 }
 
-// The anti-aliasing pre-filter of Rectify (rectification.cc PrefilterSigma) and the rows its
-// Gaussian reaches: OpenCV's float kernel is 2 * round(4 sigma) + 1 taps.
+// The camera rows a band must read beyond those its map points at: the footprint pre-filter's
+// reach (rectification.h), the second bilinear tap, and a row of slack for rounding.
 int FilterMarginRows(double camera_px_per_grid_px) {
-  const double s = camera_px_per_grid_px;
-  const double sigma = s > 1.5 ? 0.5 * std::sqrt(s * s - 1.0) : 0.0;
-  constexpr int kBilinearAndRounding = 2;  // the second bilinear tap, and a row of slack
-  return static_cast<int>(std::ceil(4.0 * sigma)) + kBilinearAndRounding + 1;
+  constexpr int kBilinearAndRounding = 2;
+  return FootprintPrefilterReach(camera_px_per_grid_px) + kBilinearAndRounding + 1;
 }
 
 struct BandMap {
