@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "bench/truth_footprint.h"
 #include "bench/truth_maps.h"
 #include "core/colour.h"
 #include "core/error.h"
@@ -34,8 +35,6 @@ constexpr const char* kParameterNames[kParameterCount] = {"roughness",  "specula
 constexpr const char* kU3mKeys[kParameterCount] = {"roughness",  "specular_value",   "specular_tint", "sheen_value",
                                                    "sheen_tint", "anisotropy_value", "metalness"};
 constexpr double kU3mDefaults[kParameterCount] = {0.7, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0};
-// A truth pixel is fabric when its alpha is at least this (holes are 0, fabric 1).
-constexpr float kFabricAlpha = 0.5f;
 
 json ReadJsonFile(const fs::path& path, const std::string& what) {
   std::ifstream in(path);
@@ -45,20 +44,6 @@ json ReadJsonFile(const fs::path& path, const std::string& what) {
   } catch (const json::exception& e) {
     throw InputError(path.string(), "", "valid JSON (" + std::string(e.what()) + ")");
   }
-}
-
-// Bilinear sampling position of an output pixel centre on the truth grid.
-struct Sample {
-  int c0 = 0, r0 = 0;
-  float fx = 0, fy = 0;
-  bool inside = false;
-};
-
-float Bilinear(const Image& image, int channel, const Sample& s) {
-  const int c1 = std::min(s.c0 + 1, image.width() - 1), r1 = std::min(s.r0 + 1, image.height() - 1);
-  const float a = image.at(channel, s.r0, s.c0), b = image.at(channel, s.r0, c1);
-  const float c = image.at(channel, r1, s.c0), d = image.at(channel, r1, c1);
-  return (1 - s.fy) * ((1 - s.fx) * a + s.fx * b) + s.fy * ((1 - s.fx) * c + s.fx * d);
 }
 
 struct Stats {
@@ -242,37 +227,47 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
     ev.parameters.push_back(e);
   }
 
-  // Where each output pixel falls on the truth grid, and whether it is fabric there.
-  std::vector<Sample> samples(static_cast<std::size_t>(w) * h);
-  const int tw = truth.normal.width(), th = truth.normal.height();
-  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t row = begin; row < end; ++row) {
-      for (int col = 0; col < w; ++col) {
-        const double x = x0_mm + (col + 0.5) * pitch_mm, y = y1_mm - (static_cast<double>(row) + 0.5) * pitch_mm;
-        const double u = (x - truth.x0_mm) / truth.pitch_mm - 0.5, v = (truth.y1_mm - y) / truth.pitch_mm - 0.5;
-        Sample& s = samples[row * w + col];
-        s.inside = u >= -1e-6 && v >= -1e-6 && u <= tw - 1 + 1e-6 && v <= th - 1 + 1e-6;
-        if (!s.inside) continue;
-        s.c0 = std::clamp(static_cast<int>(std::floor(u)), 0, tw - 1);
-        s.r0 = std::clamp(static_cast<int>(std::floor(v)), 0, th - 1);
-        s.fx = static_cast<float>(std::clamp(u - s.c0, 0.0, 1.0));
-        s.fy = static_cast<float>(std::clamp(v - s.r0, 0.0, 1.0));
-        if (!truth.alpha.empty()) {
-          const int c1 = std::min(s.c0 + 1, tw - 1), r1 = std::min(s.r0 + 1, th - 1);
-          for (int rr : {s.r0, r1}) {
-            for (int cc : {s.c0, c1}) s.inside = s.inside && truth.alpha.at(0, rr, cc) >= kFabricAlpha;
-          }
-        }
-      }
-    }
-  });
-
+  // Which truth pixels each output pixel is compared with (bench/truth_footprint.h).
+  const TruthFootprint footprint(truth, x0_mm, y1_mm, pitch_mm);
   const std::vector<Eigen::Vector3d> lights = HeldOutLights(truth_json, options);
   ev.held_out_lights = static_cast<int>(lights.size());
   const Eigen::Vector3d view_in_world = Eigen::Vector3d::UnitZ();
 
+  // The truth over a set of taps: normal (unit), shading frame (the scene's fibre direction, as the
+  // renderer shades it, where truth/tangent.exr exists) and Principled parameters.
+  struct TruthPoint {
+    Eigen::Vector3d normal, tangent, bitangent;
+    PrincipledParams<double> params;
+  };
+  auto truth_at = [&](const std::vector<TruthTap>& taps, TruthPoint* t) {
+    t->normal = Eigen::Vector3d(TapMean(truth.normal, 0, taps), TapMean(truth.normal, 1, taps), TapMean(truth.normal, 2, taps));
+    if (!(t->normal.norm() > 0)) return false;
+    t->normal.normalize();
+    LocalFrame(t->normal, 0.0, &t->tangent, &t->bitangent);
+    if (!truth.tangent.empty()) {
+      Eigen::Vector3d fibre(TapMean(truth.tangent, 0, taps), TapMean(truth.tangent, 1, taps), TapMean(truth.tangent, 2, taps));
+      fibre -= fibre.dot(t->normal) * t->normal;
+      if (fibre.squaredNorm() > 1e-12) {
+        t->tangent = fibre.normalized();
+        t->bitangent = t->normal.cross(t->tangent);
+      }
+    }
+    t->params.base_color = Eigen::Vector3d(TapMean(truth.base_color, 0, taps), TapMean(truth.base_color, 1, taps), TapMean(truth.base_color, 2, taps));
+    double* fields[kParameterCount] = {&t->params.roughness,  &t->params.specular,    &t->params.specular_tint,
+                                       &t->params.sheen,      &t->params.sheen_tint,  &t->params.anisotropic,
+                                       &t->params.metallic};
+    // A truth folder without the map means the scene has the U3M default there.
+    for (int p = 0; p < kParameterCount; ++p) *fields[p] = truth.parameters[p].empty() ? kU3mDefaults[p] : TapMean(truth.parameters[p], 0, taps);
+    return true;
+  };
+  auto render = [&](const PrincipledParams<double>& params, const Eigen::Vector3d& n, const Eigen::Vector3d& t,
+                    const Eigen::Vector3d& b, const Eigen::Vector3d& l) -> Eigen::Vector3d {
+    const Eigen::Vector3d ll(l.dot(t), l.dot(b), l.dot(n)), vl(view_in_world.dot(t), view_in_world.dot(b), view_in_world.dot(n));
+    return EvaluatePrincipled(params, ll, vl) * std::max(0.0, ll.z());
+  };
+
   // Per-pixel errors (NaN where not compared), then summaries.
-  const std::size_t n = samples.size();
+  const std::size_t n = static_cast<std::size_t>(w) * h;
   // Per pixel only what needs percentiles (12 bytes a pixel); everything else is summed per row,
   // so a 36-megapixel output needs no per-pixel parameter or render buffers.
   std::vector<float> angle(n, NAN), de_albedo(n, NAN), de_base(n, NAN);
@@ -285,19 +280,22 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   };
   std::vector<RowSums> row_sums(static_cast<std::size_t>(h));
   ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    std::vector<TruthTap> taps, one_tap(1);  // reused for every pixel of the chunk
+    std::vector<Eigen::Vector3d> truth_radiance(lights.size());
     for (std::size_t row = begin; row < end; ++row) {
       RowSums& sums = row_sums[row];
       for (int col = 0; col < w; ++col) {
         const std::size_t i = row * w + col;
-        const Sample& s = samples[i];
-        if (!s.inside) continue;
-        Eigen::Vector3d nt(Bilinear(truth.normal, 0, s), Bilinear(truth.normal, 1, s), Bilinear(truth.normal, 2, s));
+        if (!footprint.Gather(col, static_cast<int>(row), &taps)) continue;
+        TruthPoint tp;
+        if (!truth_at(taps, &tp)) continue;
         Eigen::Vector3d ne(normal.at(0, row, col), normal.at(1, row, col), normal.at(2, row, col));
-        if (!(nt.norm() > 0) || !(ne.norm() > 0) || !ne.allFinite()) continue;
-        nt.normalize();
+        if (!(ne.norm() > 0) || !ne.allFinite()) continue;
+        const Eigen::Vector3d& nt = tp.normal;
         ne.normalize();
         angle[i] = static_cast<float>(std::atan2(nt.cross(ne).norm(), nt.dot(ne)) * kRadToDeg);
-        const Rgb truth_rgb{Bilinear(truth.base_color, 0, s), Bilinear(truth.base_color, 1, s), Bilinear(truth.base_color, 2, s)};
+        const Rgb truth_rgb{static_cast<float>(tp.params.base_color[0]), static_cast<float>(tp.params.base_color[1]),
+                            static_cast<float>(tp.params.base_color[2])};
         const Lab truth_lab = LinearSrgbToLab(truth_rgb);
         if (!albedo.empty()) {
           de_albedo[i] = static_cast<float>(Ciede2000(truth_lab, LinearSrgbToLab({albedo.at(0, row, col), albedo.at(1, row, col), albedo.at(2, row, col)})));
@@ -306,7 +304,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
           de_base[i] = static_cast<float>(Ciede2000(truth_lab, LinearSrgbToLab({base_color.at(0, row, col), base_color.at(1, row, col), base_color.at(2, row, col)})));
         }
         if (!height.empty()) {
-          const double truth_h = Bilinear(truth.height_mm, 0, s), d = height.at(0, row, col) - truth_h;
+          const double truth_h = TapMean(truth.height_mm, 0, taps), d = height.at(0, row, col) - truth_h;
           if (std::isfinite(d)) {
             sums.height_d += d;
             sums.height_d2 += d * d;
@@ -315,46 +313,52 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
             ++sums.height_count;
           }
         }
-        PrincipledParams<double> truth_params, fit_params;
-        truth_params.base_color = Eigen::Vector3d(truth_rgb[0], truth_rgb[1], truth_rgb[2]);
+        PrincipledParams<double> fit_params;
         if (!base_color.empty()) {
           fit_params.base_color = Eigen::Vector3d(base_color.at(0, row, col), base_color.at(1, row, col), base_color.at(2, row, col));
         }
-        double* truth_fields[kParameterCount] = {&truth_params.roughness,  &truth_params.specular,    &truth_params.specular_tint,
-                                                 &truth_params.sheen,      &truth_params.sheen_tint,  &truth_params.anisotropic,
-                                                 &truth_params.metallic};
+        const double truth_fields[kParameterCount] = {tp.params.roughness,  tp.params.specular,    tp.params.specular_tint,
+                                                      tp.params.sheen,      tp.params.sheen_tint,  tp.params.anisotropic,
+                                                      tp.params.metallic};
         double* fit_fields[kParameterCount] = {&fit_params.roughness,  &fit_params.specular,    &fit_params.specular_tint,
                                                &fit_params.sheen,      &fit_params.sheen_tint,  &fit_params.anisotropic,
                                                &fit_params.metallic};
         for (int p = 0; p < kParameterCount; ++p) {
-          // A truth folder without the map means the scene has the U3M default there.
-          const double t = truth.parameters[p].empty() ? kU3mDefaults[p] : Bilinear(truth.parameters[p], 0, s);
+          const double t = truth_fields[p];
           const double e = estimate_maps[p].empty() ? constants[p] : estimate_maps[p].at(0, row, col);
-          *truth_fields[p] = t;
           *fit_fields[p] = e;
           sums.truth[p] += t;
           sums.estimate[p] += e;
           sums.abs_error[p] += std::abs(e - t);
         }
         ++sums.parameter_count;
-        Eigen::Vector3d tt, tb, et, eb;
-        LocalFrame(nt, 0.0, &tt, &tb);
-        if (!truth.tangent.empty()) {  // the scene's fibre direction, as the renderer shades it
-          Eigen::Vector3d fibre(Bilinear(truth.tangent, 0, s), Bilinear(truth.tangent, 1, s), Bilinear(truth.tangent, 2, s));
-          fibre -= fibre.dot(nt) * nt;
-          if (fibre.squaredNorm() > 1e-12) {
-            tt = fibre.normalized();
-            tb = nt.cross(tt);
+        // The truth's radiance under each held-out light: of the interpolated truth (bilinear), or
+        // the area-weighted mean of each truth pixel's own (footprints: what a photograph of the
+        // coarser pixel would hold).
+        bool truth_finite = true;
+        if (!footprint.averages_footprints()) {
+          for (std::size_t k = 0; k < lights.size(); ++k) truth_radiance[k] = render(tp.params, nt, tp.tangent, tp.bitangent, lights[k]);
+        } else {
+          for (auto& r : truth_radiance) r.setZero();
+          for (const TruthTap& tap : taps) {
+            one_tap[0] = {tap.col, tap.row, 1.0f};
+            TruthPoint at_tap;
+            if (!truth_at(one_tap, &at_tap)) {
+              truth_finite = false;
+              break;
+            }
+            for (std::size_t k = 0; k < lights.size(); ++k) {
+              truth_radiance[k] += tap.weight * render(at_tap.params, at_tap.normal, at_tap.tangent, at_tap.bitangent, lights[k]);
+            }
           }
         }
+        if (!truth_finite) continue;
+        Eigen::Vector3d et, eb;
         LocalFrame(ne, rotation_map.empty() ? rotation_constant_deg : rotation_map.at(0, row, col), &et, &eb);
-        const Eigen::Vector3d vt(view_in_world.dot(tt), view_in_world.dot(tb), view_in_world.dot(nt));
-        const Eigen::Vector3d ve(view_in_world.dot(et), view_in_world.dot(eb), view_in_world.dot(ne));
         double num = 0, den = 0;
-        for (const Eigen::Vector3d& l : lights) {
-          const Eigen::Vector3d lt(l.dot(tt), l.dot(tb), l.dot(nt)), le(l.dot(et), l.dot(eb), l.dot(ne));
-          const Eigen::Vector3d rt = EvaluatePrincipled(truth_params, lt, vt) * std::max(0.0, lt.z());
-          const Eigen::Vector3d re = EvaluatePrincipled(fit_params, le, ve) * std::max(0.0, le.z());
+        for (std::size_t k = 0; k < lights.size(); ++k) {
+          const Eigen::Vector3d& rt = truth_radiance[k];
+          const Eigen::Vector3d re = render(fit_params, ne, et, eb, lights[k]);
           if (!re.allFinite() || !rt.allFinite()) continue;
           num += (re - rt).squaredNorm();
           den += rt.squaredNorm();

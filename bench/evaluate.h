@@ -6,8 +6,9 @@
 // TRUTH is the synthetic capture's truth/ folder (truth.json + maps, bench/truth_maps.h).
 // The processed maps lie on the calibrated metric grid (report.json /calibration/grid: pitch_mm,
 // region_mm), the truth maps on the scene's grid (truth.json /rig/sample_rect_mm); both in world mm.
-// The truth is resampled bilinearly at each output pixel centre before comparing. Only pixels whose
-// four truth neighbours are all fabric (alpha >= 0.5; no holes, no table) are compared.
+// The truth is resampled bilinearly at each output pixel centre, or averaged over each output
+// pixel's footprint when the output is coarser (bench/truth_footprint.h). Only pixels whose truth
+// neighbours or footprint are all fabric (alpha >= 0.5; no holes, no table) are compared.
 //
 // Definitions and units are in docs/bench.md.
 

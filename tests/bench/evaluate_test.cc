@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <iostream>
 #include <fstream>
 
 #include <Eigen/Geometry>
@@ -31,6 +32,9 @@ constexpr double kRotationToleranceDeg = 0.02;  // float32 maps
 constexpr double kRoughnessShift = 0.1;
 constexpr double kShiftTolerance = 1e-4;
 constexpr double kResampleToleranceDeg = 0.05;  // float32 interpolation and renormalisation
+// A point sample of each 3 x 3 footprint (its centre truth pixel) on the plain weave at 300 dpi is
+// this far from the footprint's mean normal, at least: what comparing with the wrong truth costs.
+constexpr double kPointSampleMinErrorDeg = 1.0;
 // Re-render error of a material equal to the truth except specular written as its mean constant.
 constexpr double kConstantSpecularRerender = 0.01;
 
@@ -193,6 +197,58 @@ TEST_F(EvaluateTest, ResamplesTruthOntoAFinerOutputGrid) {
   EXPECT_EQ(e.pixels_compared, (2 * kSize - 2) * (2 * kSize - 2));
   EXPECT_LT(e.normal_mean_deg, kResampleToleranceDeg);
   EXPECT_LT(e.normal_p95_deg, kResampleToleranceDeg);
+}
+
+TEST_F(EvaluateTest, AveragesTheTruthOverEachPixelOfACoarserOutput) {
+  // Output three times coarser than the truth (a camera finer than the finished maps): a map pixel
+  // holds the fabric averaged over its 3 x 3 truth pixels. An output holding those averages has no
+  // error; one holding the centre truth pixel of each footprint (what bilinear sampling at the
+  // output centre would compare with) has.
+  constexpr int kFactor = 3, kCoarse = kSize / kFactor;
+  const double half = 0.5 * kSize * kPitchMm, coarse_pitch = kFactor * kPitchMm;
+  auto write = [&](bool average) {
+    const fs::path out = WriteOutput(0.0, 0.0);
+    std::ofstream(out / "report.json") << nlohmann::json{
+        {"calibration", {{"grid", {{"pitch_mm", coarse_pitch}, {"region_mm", {-half, half - kCoarse * coarse_pitch, -half + kCoarse * coarse_pitch, half}}}}}}}.dump();
+    auto reduce = [&](const Image& t, bool unit) {
+      Image r(kCoarse, kCoarse, t.channels(), 0.0f, coarse_pitch);
+      for (int row = 0; row < kCoarse; ++row) {
+        for (int col = 0; col < kCoarse; ++col) {
+          Eigen::Vector3d v = Eigen::Vector3d::Zero();
+          for (int c = 0; c < t.channels(); ++c) {
+            if (!average) {
+              v[c] = t.at(c, kFactor * row + 1, kFactor * col + 1);
+              continue;
+            }
+            for (int j = 0; j < kFactor; ++j) {
+              for (int i = 0; i < kFactor; ++i) v[c] += t.at(c, kFactor * row + j, kFactor * col + i) / (kFactor * kFactor);
+            }
+          }
+          if (unit) v.normalize();
+          for (int c = 0; c < t.channels(); ++c) r.at(c, row, col) = static_cast<float>(v[c]);
+        }
+      }
+      return r;
+    };
+    WriteMap(reduce(scene_.normal, true), out / "maps" / "normal.exr");
+    WriteMap(reduce(scene_.base_color, false), out / "maps" / "albedo.exr");
+    WriteMap(reduce(scene_.base_color, false), out / "maps" / "base_color.exr");
+    WriteMap(reduce(scene_.height_mm, false), out / "maps" / "height.exr");
+    WriteMap(reduce(scene_.roughness, false), out / "maps" / "roughness.exr");
+    for (const char* name : {"specular_tint", "sheen_tint", "anisotropic", "metallic"}) fs::remove(out / "maps" / (std::string(name) + ".exr"));
+    return Evaluate(out, root_ / "truth");
+  };
+  const Evaluation averaged = write(true);
+  EXPECT_EQ(averaged.width, kCoarse);
+  EXPECT_EQ(averaged.pixels_compared, kCoarse * kCoarse);  // every footprint lies on the fabric
+  EXPECT_LT(averaged.normal_mean_deg, kResampleToleranceDeg);
+  EXPECT_LT(averaged.albedo_de_mean, kZeroTolerance);
+  EXPECT_LT(averaged.height_rmse_mm, kZeroTolerance);
+  EXPECT_LT(averaged.parameters[0].mean_abs_error, kShiftTolerance);  // roughness
+  const Evaluation point = write(false);
+  std::cout << "measured: 3x coarser output, footprint means " << averaged.normal_mean_deg << " deg, centre samples "
+            << point.normal_mean_deg << " deg\n";
+  EXPECT_GT(point.normal_mean_deg, kPointSampleMinErrorDeg);
 }
 
 TEST_F(EvaluateTest, MissingDebugMapsIsAnInputError) {
