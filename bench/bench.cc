@@ -67,9 +67,10 @@ void SubsetLights(synthetic::Rig* rig, int count) {
 fs::path EnsureCapture(const BenchCase& c, const BenchOptions& options, int* lights_out) {
   const fs::path dir = options.out_dir / "work" / "captures" / c.CaptureId();
   synthetic::RigOptions rig_options;
-  rig_options.width = c.size_px;
-  rig_options.height = c.size_px;
-  rig_options.pitch_mm = 25.4 / kDpi;
+  const int camera_px = c.size_px * c.camera_per_map;
+  rig_options.width = camera_px;
+  rig_options.height = camera_px;
+  rig_options.pitch_mm = 25.4 / (kDpi * c.camera_per_map);
   rig_options.seed = options.seed;
   synthetic::Rig rig = synthetic::MakeRig(c.rig, rig_options);
   SubsetLights(&rig, c.lights);
@@ -77,13 +78,13 @@ fs::path EnsureCapture(const BenchCase& c, const BenchOptions& options, int* lig
   if (fs::exists(dir / synthetic::kCaptureSubdir / "capture.json")) return dir;
   fs::remove_all(dir);
   synthetic::SceneOptions scene_options;
-  scene_options.width = scene_options.height = std::max(8, static_cast<int>(std::lround(synthetic::kSampleFillOfView * c.size_px)));
+  scene_options.width = scene_options.height = std::max(8, static_cast<int>(std::lround(synthetic::kSampleFillOfView * camera_px)));
   scene_options.pitch_mm = rig_options.pitch_mm;
   scene_options.seed = options.seed;
   // Rendered as `u3mscan synth` does (synth_run.h): a finer sampling of the fabric seen through an
   // area-integrating camera, the truth being its area average on the output grid, so the error the
   // bench reports is the pipeline's and not the point-sampled renderer's aliasing.
-  const int supersample = synthetic::AutoSupersample(c.size_px, c.size_px);
+  const int supersample = synthetic::AutoSupersample(camera_px, camera_px);
   const synthetic::OversampledScene scene = synthetic::MakeOversampledScene(c.scene, scene_options, supersample);
   synthetic::CaptureOptions capture;
   capture.format = synthetic::FrameFormat::kTiff;  // the decoded values; DNG decoding is not what we time
@@ -190,6 +191,8 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   if (!c.integrator.empty()) args.insert(args.end(), {"--integrator", c.integrator});
   if (!c.fit_mode.empty()) args.insert(args.end(), {"--fit-mode", c.fit_mode});
   if (!c.hold_out_lights.empty()) args.insert(args.end(), {"--hold-out-lights", c.hold_out_lights});
+  // A camera finer than the maps: the maps stay at the matrix's dpi (the capture's own is finer).
+  if (c.camera_per_map > 1) args.insert(args.end(), {"--dpi", Fixed(kDpi, 0)});
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);
@@ -266,6 +269,7 @@ std::string BenchCase::CaptureId() const {
   std::string id = scene + "_" + rig + "_" + std::to_string(size_px);
   if (lights > 0) id += "_l" + std::to_string(lights);
   if (!calibration_frames) id += "_nocal";
+  if (camera_per_map > 1) id += "_cam" + std::to_string(camera_per_map) + "x";
   return id;
 }
 
@@ -337,6 +341,20 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
     add({"plain", "near", base, 0, true, "balanced", "", "", "held-out", "", held_out});
     add({"satin", "distant", base, 0, true, "balanced", "", "", "held-out", "", held_out});
   }
+  // Camera finer than the maps: the same sample photographed at 2x (and 3x, full) the maps' dpi,
+  // processed at the matrix's dpi, against the matrix run at 1x (docs/calibration.md, "Footprint
+  // pre-filter").
+  auto finer = [&](const std::string& scene, const std::string& preset, int factor) {
+    BenchCase c{scene, "distant", base, 0, true, preset, "", "", "camera-finer", "", ""};
+    c.camera_per_map = factor;
+    add(c);
+  };
+  if (quick) {
+    finer("plain", "fast", 2);
+  } else {
+    for (const char* scene : {"plain", "satin", "velvet"}) finer(scene, "balanced", 2);
+    finer("plain", "balanced", 3);
+  }
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).
   add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", "", ""});
   if (!quick) add({"plain", "near", base, 0, false, "balanced", "", "", "needs-less", "", ""});
@@ -358,7 +376,7 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
 }
 
 std::vector<std::string> BenchCsvColumns() {
-  return {"group", "scene", "rig", "size_px", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
+  return {"group", "scene", "rig", "size_px", "camera_per_map", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
           "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
@@ -374,7 +392,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     const bool ok = r.status == "ok";
     auto v = [&](double x, int d) { return ok ? Fixed(x, d) : std::string(); };
     std::vector<std::string> cells = {
-        r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), v(r.megapixels, 4), std::to_string(r.lights_used),
+        r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), std::to_string(r.c.camera_per_map), v(r.megapixels, 4), std::to_string(r.lights_used),
         r.c.calibration_frames ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.fit_mode_used, r.status,
         Fixed(r.wall_s, 3), v(r.total_s, 3), Fixed(r.peak_rss_mib, 1), v(r.stages.read, 3), v(r.stages.calibration, 3),
         v(r.stages.rectify, 3), v(r.stages.alpha, 3), v(r.stages.photometric_stereo, 3), v(r.stages.integration, 3),
@@ -492,6 +510,28 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << r.c.hold_out_lights << " | " << Fixed(r.total_s, 2)
       << " | " << Fixed(100.0 * r.held_out_rmse, 2) << " | " << Fixed(100.0 * r.evaluation.rerender_relative_rmse, 2)
       << " | " << (all ? Fixed(100.0 * all->evaluation.rerender_relative_rmse, 2) : std::string("-")) << " |\n";
+  }
+
+  // Camera finer than the maps, against the 1x matrix run of the same scene and preset.
+  s << "\n## Camera finer than the maps (footprint pre-filter)\n\n| capture | camera px per map px | preset | total s | "
+       "normal mean / p95 deg | albedo dE | height % | re-render % | at 1x: normal mean / p95 deg | height % | re-render % |\n"
+       "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const BenchRow& r : rows) {
+    if (r.c.group != "camera-finer" || r.status != "ok") continue;
+    BenchCase one = r.c;
+    one.camera_per_map = 1;
+    const BenchRow* at_1x = find(one.CaptureId(), r.c.preset);
+    const Evaluation& e = r.evaluation;
+    s << "| " << r.c.CaptureId() << " | " << r.c.camera_per_map << " | " << r.c.preset << " | " << Fixed(r.total_s, 2) << " | "
+      << Fixed(e.normal_mean_deg, 2) << " / " << Fixed(e.normal_p95_deg, 2) << " | " << Fixed(e.albedo_de_mean, 2) << " | "
+      << Fixed(e.height_rmse_percent, 1) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " | ";
+    if (at_1x) {
+      const Evaluation& a = at_1x->evaluation;
+      s << Fixed(a.normal_mean_deg, 2) << " / " << Fixed(a.normal_p95_deg, 2) << " | " << Fixed(a.height_rmse_percent, 1) << " | "
+        << Fixed(100.0 * a.rerender_relative_rmse, 2) << " |\n";
+    } else {
+      s << "- | - | - |\n";
+    }
   }
 
   // Needs less: steps skipped and the time they save.

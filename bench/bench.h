@@ -12,8 +12,8 @@
 // Matrix: every fabric preset of the synthetic scanner x {distant, near} rigs x every preset at the base size; plus, on one
 // scene, the method comparisons (ls vs robust photometric stereo, dct vs robust integration,
 // clusters vs per-pixel fitting), the "needs less" pairs (no calibration
-// frames, no oblique camera vs oblique), sizes for the megapixel axis and light subsets for the
-// lights axis. --quick shrinks every axis.
+// frames, no oblique camera vs oblique), sizes for the megapixel axis, light subsets for the
+// lights axis, held-out lights, and cameras finer than the maps. --quick shrinks every axis.
 
 #include <filesystem>
 #include <limits>
@@ -37,6 +37,10 @@ struct BenchCase {
   std::string fit_mode;       // "" = the preset's; clusters | per-pixel (u3mscan process --fit-mode)
   // "" = none; light ids, comma-separated (u3mscan process --hold-out-lights): group "held-out"
   std::string hold_out_lights;
+  // Camera pixels per finished-map pixel along each axis: 1 = the camera at the maps' 300 dpi; 2 =
+  // a camera at 600 dpi (size_px * 2 pixels, the same sample) processed with --dpi 300: group
+  // "camera-finer".
+  int camera_per_map = 1;
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };

@@ -156,9 +156,13 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   const auto cases = BenchMatrix(options);
   std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
-  int held_out = 0;
+  int held_out = 0, camera_finer = 0;
   for (const auto& c : cases) {
     held_out += !c.hold_out_lights.empty() && c.group == "held-out";
+    camera_finer += c.group == "camera-finer" && c.camera_per_map == 2;
+    if (c.group != "camera-finer") {
+      EXPECT_EQ(c.camera_per_map, 1) << c.RunId();
+    }
     presets.insert(c.preset);
     rigs.insert(c.rig);
     if (!c.solver.empty()) solvers.insert(c.solver);
@@ -174,6 +178,7 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   EXPECT_EQ(fit_modes, std::set<std::string>{"clusters"}) << "clusters against the balanced run's per-pixel fit";
   EXPECT_TRUE(without_calibration);
   EXPECT_EQ(held_out, 1) << "one run with lights held out of the fit";
+  EXPECT_EQ(camera_finer, 1) << "one run with a camera at twice the maps' dpi";
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());
 }

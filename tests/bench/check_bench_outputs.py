@@ -10,7 +10,7 @@ import xml.dom.minidom
 from pathlib import Path
 
 EXPECTED_COLUMNS = [
-    "group", "scene", "rig", "size_px", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
+    "group", "scene", "rig", "size_px", "camera_per_map", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
     "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
@@ -58,9 +58,21 @@ def main():
         fail(f"held-out run missing or its held_out_rel_rmse out of range: {held_out}")
     if any(r["held_out_rel_rmse"] for r in records if r["group"] != "held-out"):
         fail("held_out_rel_rmse filled for a run that held no light out")
+    finer = [r for r in records if r["group"] == "camera-finer"]
+    if not finer or any(int(r["camera_per_map"]) < 2 for r in finer):
+        fail(f"camera-finer run missing or its camera_per_map below 2: {finer}")
+    if any(r["camera_per_map"] != "1" for r in records if r["group"] != "camera-finer"):
+        fail("camera_per_map other than 1 outside the camera-finer group")
+    at_1x = {(r["scene"], r["rig"], r["preset"]): r for r in records if r["group"] == "matrix"}
+    for r in finer:
+        same = at_1x.get((r["scene"], r["rig"], r["preset"]))
+        # The same sample on the same 300 dpi grid: the finer camera must not change the map's size.
+        if same and abs(float(same["megapixels"]) - float(r["megapixels"])) > 0.1 * float(same["megapixels"]):
+            fail(f"camera-finer map size {r['megapixels']} MP differs from the 1x run's {same['megapixels']} MP")
     md = (out / "bench.md").read_text()
     for heading in ("## Every run", "## Presets", "## Methods on the same capture",
-                    "### Fit: clusters vs per-pixel", "## Held-out photographs", "## Scenes that need less"):
+                    "### Fit: clusters vs per-pixel", "## Held-out photographs", "## Camera finer than the maps",
+                    "## Scenes that need less"):
         if heading not in md:
             fail(f"bench.md lacks {heading}")
     for plot in PLOTS:
