@@ -585,6 +585,10 @@ nlohmann::json CalibrationResult::ToJson() const {
                    {"pose_source", c.pose_source},
                    {"board_frames", c.board_frames}};
     camera["reprojection_error_px"] = c.reprojection_error_px ? json(*c.reprojection_error_px) : json(nullptr);
+    // Camera pixels per finished-map pixel at the grid's centre (rectification's s; > 1: the
+    // footprint pre-filter runs). Sub-pixel structure resolves well from about 2 on.
+    const double pitch = c.model.PitchOnPlaneMm(grid.PixelCentreInWorld(grid.width / 2, grid.height / 2));
+    camera["camera_px_per_map_px"] = pitch > 0.0 ? json(grid.pitch_mm / pitch) : json(nullptr);
     out["cameras"].push_back(camera);
   }
   out["lights"] = json::array();

@@ -146,6 +146,10 @@ TEST(Calibrate, EveryStepRunsOnACompleteCaptureAndTheStackIsNormalised) {
   EXPECT_TRUE(json["lights"][0]["residual"].is_number());
   EXPECT_EQ(json["lights"][0]["residual_unit"], "deg");
   EXPECT_TRUE(json["cameras"][0]["reprojection_error_px"].is_number());
+  // 0.25 mm camera pixels, the grid rounded down to a whole dpi: a hair over 1 camera px per map px.
+  constexpr double kScaleTolerance = 0.01;  // the pose comes from the board
+  ASSERT_TRUE(json["cameras"][0]["camera_px_per_map_px"].is_number());
+  EXPECT_NEAR(json["cameras"][0]["camera_px_per_map_px"].get<double>(), result.grid.pitch_mm / 0.25, kScaleTolerance);
   EXPECT_TRUE(json["colour"]["ciede2000_after_mean"].is_number());
 
   const Stack stack = BuildStack(capture.manifest, capture.Loader(), result, TestOptions());
