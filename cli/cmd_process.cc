@@ -43,7 +43,7 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "1.0", "1.1"}));
   sub.add_flag("--package", args->options.package, "Write one .u3ma package instead of .u3m + textures/");
-  sub.add_option("--dpi", args->dpi, "Resolution of the finished maps (default: the manifest's output.dpi)")
+  sub.add_option("--dpi", args->dpi, "Resolution of the finished maps (default: the manifest's output.dpi). Yarn-scale normals need the camera at 2-3x this dpi (docs/reconstruction.md)")
       ->check(CLI::Range(1.0, 10000.0));
   sub.add_flag("--debug-maps", args->options.debug_maps,
                "Also write maps/*.exr: normal, albedo, height (mm), confidence, residual and fitted maps");
