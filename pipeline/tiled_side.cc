@@ -3,7 +3,6 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 #include "capture/stack_builder.h"
 #include "core/logging.h"
@@ -229,12 +228,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   bool near_rounds_capped = false;
   int near_round_limit = ps_options.max_near_iterations;
   if (near && ps_options.refine_height) {
-    reconstruction::IntegrationOptions integration = ps_options.integration;
-    integration.pitch_mm = grid.pitch_mm;
     // Each round re-reads and re-solves every band; with the DCT integrator at most
     // kMaxBandedNearRounds rounds run (the fast preset's limit), whatever the preset asks.
     constexpr int kMaxBandedNearRounds = 3;
-    const int max_rounds = bands.count() > 1 && integration.method == reconstruction::Integrator::kDct
+    const int max_rounds = bands.count() > 1 && ps_options.integration.method == reconstruction::Integrator::kDct
                                ? std::min(ps_options.max_near_iterations, kMaxBandedNearRounds)
                                : ps_options.max_near_iterations;
     near_rounds_capped = max_rounds < ps_options.max_near_iterations;
@@ -242,29 +239,25 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (near_rounds_capped)
       LogInfo() << "photometric stereo: near-light rounds capped at " << max_rounds << " in a run of " << bands.count()
                 << " bands (preset: " << ps_options.max_near_iterations << ")";
-    double previous_change = std::numeric_limits<double>::infinity();
-    for (int it = 1; it <= max_rounds; ++it) {
-      const double start = StageClock();
-      Image height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
-      solve_seconds += StageClock() - start;
-      const reconstruction::CastShadowCounts kept_counts = shadow_counts;
-      PhotometricStereoResult next = solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
-                                                 "photometric stereo (near-light round)");
-      const double change = reconstruction::MeanNormalAngleDeg(next.normal, ps.normal);
-      if (change >= previous_change) {
-        LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
-                     << " deg after " << previous_change << " deg); kept round " << it - 1;
-        shadow_counts = kept_counts;  // the kept round's marks (the bands are marked again below)
-        break;
-      }
-      previous_change = change;
-      const int rounds = it;
-      ps = std::move(next);
-      ps.height_mm = std::move(height);
-      ps.near_iterations = rounds;
-      ps.last_normal_change_deg = change;
-      if (change < ps_options.near_tolerance_deg) break;
-    }
+    reconstruction::PhotometricStereoOptions round_options = ps_options;
+    round_options.max_near_iterations = max_rounds;
+    // Each solve is one sweep of every band, marked from the round's heights; a rejected round
+    // gives back the kept round's shadow counts (the bands are marked again below).
+    reconstruction::CastShadowCounts counts_before_sweep = shadow_counts;
+    const double solve_before = solve_seconds, shadow_before = shadow_seconds, start = StageClock();
+    ps = reconstruction::RefineNearLightHeights(
+        std::move(ps), round_options, grid.pitch_mm,
+        [&](const Image& height) {
+          counts_before_sweep = shadow_counts;
+          return solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
+                             "photometric stereo (near-light round)");
+        },
+        [&](const Image&, bool kept_round) {
+          if (kept_round) shadow_counts = counts_before_sweep;
+        });
+    // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
+    // photometric stereo's.
+    solve_seconds = solve_before + (StageClock() - start) - (shadow_seconds - shadow_before);
   }
   if (options.mark_cast_shadows && near && ps_options.refine_height && ps.near_iterations > 0) shadow_height = ps.height_mm;
   if (near && ps.height_mm.empty()) {

@@ -205,7 +205,7 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
   result = RefineNearLightHeights(
       std::move(result), options, stack->grid.pitch_mm,
       [&](const Image& height) { return SolvePhotometricStereoAt(*stack, again, height); },
-      [&](const Image& height) {
+      [&](const Image& height, bool /*kept_round*/) {
         const double start = Seconds();
         out.counts = MarkCastShadows(height, stack, shadow_options);
         out.mark_seconds += Seconds() - start;

@@ -748,7 +748,7 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
   if (solver.has_point_lights() && options.refine_height) {
     result = RefineNearLightHeights(
         std::move(result), options, stack.grid.pitch_mm,
-        [&](const Image& height) { return SolveAt(solver, stack, options, height); }, [](const Image&) {}, progress);
+        [&](const Image& height) { return SolveAt(solver, stack, options, height); }, [](const Image&, bool) {}, progress);
   }
   if (solver.has_point_lights() && result.height_mm.empty()) result.height_mm = start;
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
@@ -781,8 +781,7 @@ double ChooseDiffuseRoughness(const Stack& stack, const PhotometricStereoOptions
 PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, const PhotometricStereoOptions& options,
                                                double pitch_mm,
                                                const std::function<PhotometricStereoResult(const Image&)>& solve_at,
-                                               const std::function<void(const Image&)>& at_height,
-                                               const ProgressCallback& progress) {
+                                               const AtRefinementHeight& at_height, const ProgressCallback& progress) {
   IntegrationOptions integration = options.integration;
   integration.pitch_mm = pitch_mm;
   double previous_change = std::numeric_limits<double>::infinity();
@@ -790,7 +789,7 @@ PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, c
     ReportProgress(progress, "photometric stereo", static_cast<double>(it) / (options.max_near_iterations + 1));
     // Confidence as integration weights: unreliable normals do not bend the height.
     Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
-    at_height(height);
+    at_height(height, false);
     PhotometricStereoResult next = solve_at(height);
     const double change = MeanNormalAngleDeg(next.normal, result.normal);
     if (change >= previous_change) {
@@ -798,7 +797,7 @@ PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, c
       // whose change was the smallest.
       LogWarning() << "photometric stereo: near-light refinement diverges (mean normal change " << change
                    << " deg after " << previous_change << " deg); kept round " << it - 1;
-      at_height(result.height_mm);
+      at_height(result.height_mm, true);
       break;
     }
     previous_change = change;

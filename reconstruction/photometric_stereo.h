@@ -157,16 +157,19 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
 double MeanNormalAngleDeg(const Image& a, const Image& b);
 
 // The near-light height refinement from a first solve `result`: integrate its normals (confidence as
-// weights, options.integration at pitch_mm), call at_height(height) (a caller may renew per-height
-// data there: the shadow marks), solve_at(height), and repeat until the mean normal change is below
-// options.near_tolerance_deg or after options.max_near_iterations rounds. A round that changes the
-// normals more than the one before is rejected (not converging): the previous round is kept and
-// at_height is called once more with its height, so that what it renewed matches the result.
-// Fills height_mm, near_iterations and last_normal_change_deg of the result.
+// weights, options.integration at pitch_mm), call at_height(height, false) (a caller may renew
+// per-height data there: the shadow marks), solve_at(height), and repeat until the mean normal
+// change is below options.near_tolerance_deg or after options.max_near_iterations rounds. A round
+// that changes the normals more than the one before is rejected (not converging): the previous
+// round is kept and at_height(its height, true) is called, so that what the caller renewed can
+// match the result again (the kept round's height is empty when no round was kept: the first
+// solve's plane). Fills height_mm, near_iterations and last_normal_change_deg of the result.
+// Used by RunPhotometricStereo, the cast-shadow marking and the banded pipeline (one sweep of
+// every band per solve_at).
+using AtRefinementHeight = std::function<void(const Image& height_mm, bool kept_round)>;
 PhotometricStereoResult RefineNearLightHeights(PhotometricStereoResult result, const PhotometricStereoOptions& options,
                                                double pitch_mm,
                                                const std::function<PhotometricStereoResult(const Image&)>& solve_at,
-                                               const std::function<void(const Image&)>& at_height,
-                                               const ProgressCallback& progress = {});
+                                               const AtRefinementHeight& at_height, const ProgressCallback& progress = {});
 
 }  // namespace u3mscan::reconstruction
