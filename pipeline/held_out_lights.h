@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "capture/manifest.h"
 #include "core/stack.h"
 #include "fitting/principled_fit.h"
 #include "pipeline/stages.h"
@@ -36,10 +37,28 @@ struct HeldOutCheck {
 // fewer than three lights would be left to reconstruct from.
 std::vector<Observation> TakeHeldOutObservations(Stack* stack, const std::vector<std::string>& light_ids);
 
+// The banded path's form: moves the frames (indices into manifest.frames) of `side_frames` that the
+// named lights lit out of it and returns them. Throws as TakeHeldOutObservations does.
+std::vector<std::size_t> TakeHeldOutFrames(const Manifest& manifest, const std::string& side,
+                                           const std::vector<std::string>& light_ids, std::vector<std::size_t>* side_frames);
+
 // Renders every held-out observation with `fit` on `geometry` (the reconstruction of `stack`, the
 // fitted observations' stack) and compares (see above). Marks the held-out observations' cast
 // shadows from geometry.height_mm first when options.mark_cast_shadows.
 HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                                 std::vector<Observation> held_out, const StageOptions& options);
+
+// The comparison of CheckHeldOutLights summed over bands (pipeline/tiled_side.h): Add each band's
+// held-out observations (a Stack on the band's grid, cast shadows already marked) with the band's
+// fit and geometry, then Finish.
+class HeldOutSums {
+ public:
+  void Add(const fitting::FitResult& fit, const Stack& held_out, const fitting::SurfaceGeometry& geometry);
+  HeldOutCheck Finish(double seconds) const;
+
+ private:
+  std::vector<HeldOutLightError> lights_;  // in the order of their first observation
+  std::vector<double> num_, den_;          // per light
+};
 
 }  // namespace u3mscan

@@ -286,12 +286,6 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     Image residual;
     double residual_mean = 0.0;
     std::optional<HeldOutCheck> held_out_check;
-    if (plan.bands > 1 && !options.hold_out_lights.empty()) {
-      throw InputError("command line", "--hold-out-lights",
-                       "a side processed in one band: the " + side + " side needs " + std::to_string(plan.bands) +
-                           " bands under --max-memory " + std::to_string(options.max_memory_gib) +
-                           " GiB (raise it to hold lights out)");
-    }
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       std::vector<Observation> held_out;
@@ -302,21 +296,23 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                                     [](const LightModel& l) { return l.type == LightType::kPoint; });
       fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
-      if (!held_out.empty()) {
-        held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
-        char detail[120];
-        std::snprintf(detail, sizeof detail, "%zu light(s) left out of the fit: relative RMSE %.2f %% against their photographs",
-                      held_out_check->lights.size(), 100.0 * held_out_check->relative_rmse);
-        report.steps.push_back({"held-out lights " + side, true, detail, held_out_check->seconds});
-      }
+      if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
-      TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations, &report, progress);
+      TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations,
+                                         options.hold_out_lights, &report, progress);
+      held_out_check = std::move(tiled.held_out);
       stack = std::move(tiled.sample);
       reconstruction = std::move(tiled.reconstruction);
       fit = std::move(tiled.fit);
       residual = std::move(tiled.residual);
       residual_mean = tiled.residual_mean;
       fitted_normals = tiled.fitted_normals;
+    }
+    if (held_out_check) {
+      char detail[120];
+      std::snprintf(detail, sizeof detail, "%zu light(s) left out of the fit: relative RMSE %.2f %% against their photographs",
+                    held_out_check->lights.size(), 100.0 * held_out_check->relative_rmse);
+      report.steps.push_back({"held-out lights " + side, true, detail, held_out_check->seconds});
     }
     report.options["tiles_" + side] = {{"bands", plan.bands}, {"band_rows", plan.band_rows},
                                        {"fit_sample_step", plan.sample_step},

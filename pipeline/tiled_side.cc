@@ -121,7 +121,8 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
 }  // namespace
 
 TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
-                           const TilePlan& plan, const Image& alpha, int residual_observations, RunReport* report,
+                           const TilePlan& plan, const Image& alpha, int residual_observations,
+                           const std::vector<std::string>& hold_out_lights, RunReport* report,
                            const ProgressCallback& progress) {
   TiledSide out;
   const MetricGrid& grid = prepared.calibration.grid;
@@ -129,6 +130,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   reconstruction::PhotometricStereoOptions ps_options = options.photometric_stereo;
   Bands bands(prepared, side, options, plan);
   std::vector<std::size_t> frames = SideSampleFrames(prepared.capture.manifest(), side);
+  // Held-out lights: their frames take no part in any sweep until the check at the end.
+  const std::vector<std::size_t> held_out_frames =
+      hold_out_lights.empty() ? std::vector<std::size_t>{}
+                              : TakeHeldOutFrames(prepared.capture.manifest(), side, hold_out_lights, &frames);
   const int step = plan.sample_step;
   const MetricGrid sample_grid = SampleGrid(grid, step);
   LogInfo() << "process (" << side << "): " << plan.bands << " bands of " << plan.band_rows << " rows ("
@@ -355,6 +360,25 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", StageClock() - start});
   // Marking time of every sweep (photometric stereo, fit, residual), with the integration it needed.
   report->steps.push_back(CastShadowStep(options, out.reconstruction.cast_shadow_share, near, shadow_seconds));
+
+  // Held-out lights: CheckHeldOutLights band by band (marks from the final heights, timed here).
+  if (!held_out_frames.empty()) {
+    start = StageClock();
+    HeldOutSums sums;
+    for (int b = 0; b < bands.count(); ++b) {
+      Stack band = bands.Build(held_out_frames, b);
+      if (options.mark_cast_shadows && !geometry.height_mm.empty()) {
+        reconstruction::MarkCastShadows(geometry.height_mm, grid, &band, options.cast_shadows);
+      }
+      const int row0 = bands.Row0(b), rows = bands.Rows(b);
+      const fitting::SurfaceGeometry band_geometry{CropRows(geometry.photometric_stereo.normal, row0, rows),
+                                                   CropRows(geometry.photometric_stereo.albedo, row0, rows),
+                                                   CropRows(geometry.height_mm, row0, rows)};
+      sums.Add(BandFit(out.fit, row0, rows), band, band_geometry);
+      ReportProgress(progress, "held-out lights", static_cast<double>(b + 1) / bands.count());
+    }
+    out.held_out = sums.Finish(StageClock() - start);
+  }
   return out;
 }
 

@@ -12,14 +12,19 @@
 //   fit        clusters on the sample (fitting/tiled_fit.h FitClusterModel), then one sweep of the
 //              per-pixel step with the clusters fixed (FitPixelRows), then the map decisions
 //   residual   one sweep over the residual map's few observations, after the decisions
+//   held out   with --hold-out-lights, those lights' frames are left out of every sweep above and
+//              compared with the finished material in one last sweep (held_out_lights.h)
 // Photometric stereo is per pixel, so a band's normals equal the untiled ones except for pixels
 // regularised toward their neighbours near a band edge; the fit differs by its clusters (fitted on
 // the sample instead of the whole grid). tests/pipeline/tiled_process_test.cc measures both.
 
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "core/progress.h"
 #include "fitting/principled_fit.h"
+#include "pipeline/held_out_lights.h"
 #include "pipeline/presets.h"
 #include "pipeline/run_report.h"
 #include "pipeline/stages.h"
@@ -34,11 +39,14 @@ struct TiledSide {
   double residual_mean = 0.0;
   bool fitted_normals = false;        // reconstruction's normals are the fit's (AdoptFittedNormals)
   Stack sample;                       // the fit's sample of the side's stack (thumbnails)
+  std::optional<HeldOutCheck> held_out;  // with hold_out_lights: the material against their photographs
 };
 
-// Throws InputError as BuildSideStack does.
+// hold_out_lights: light ids kept out of every stage and checked at the end (empty: none). Throws
+// InputError as BuildSideStack does, and as TakeHeldOutFrames does for the held-out ids.
 TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
-                           const TilePlan& plan, const Image& alpha, int residual_observations, RunReport* report,
+                           const TilePlan& plan, const Image& alpha, int residual_observations,
+                           const std::vector<std::string>& hold_out_lights, RunReport* report,
                            const ProgressCallback& progress = {});
 
 }  // namespace u3mscan
