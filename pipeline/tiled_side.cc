@@ -118,6 +118,12 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   return band;
 }
 
+// The surface the fit and the held-out check see on a band: the reconstruction's rows of it.
+fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows) {
+  return {CropRows(geometry.photometric_stereo.normal, row0, rows), CropRows(geometry.photometric_stereo.albedo, row0, rows),
+          CropRows(geometry.height_mm, row0, rows)};
+}
+
 }  // namespace
 
 TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
@@ -311,11 +317,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   for (int b = 0; b < bands.count(); ++b) {
     Stack band = bands.Build(frames, b);
     if (!shadow_height.empty()) mark(shadow_height, &band);
-    const int row0 = bands.Row0(b), rows = bands.Rows(b);
-    const fitting::SurfaceGeometry band_geometry{CropRows(geometry.photometric_stereo.normal, row0, rows),
-                                                 CropRows(geometry.photometric_stereo.albedo, row0, rows),
-                                                 CropRows(geometry.height_mm, row0, rows)};
-    fitting::FitPixelRows(model, band, band_geometry, row0, &out.fit, &tally);
+    const int row0 = bands.Row0(b);
+    fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b)), row0, &out.fit, &tally);
     ReportProgress(progress, "fit: pixels", static_cast<double>(b + 1) / bands.count());
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
@@ -371,10 +374,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         reconstruction::MarkCastShadows(geometry.height_mm, grid, &band, options.cast_shadows);
       }
       const int row0 = bands.Row0(b), rows = bands.Rows(b);
-      const fitting::SurfaceGeometry band_geometry{CropRows(geometry.photometric_stereo.normal, row0, rows),
-                                                   CropRows(geometry.photometric_stereo.albedo, row0, rows),
-                                                   CropRows(geometry.height_mm, row0, rows)};
-      sums.Add(BandFit(out.fit, row0, rows), band, band_geometry);
+      sums.Add(BandFit(out.fit, row0, rows), band, BandSurface(geometry, row0, rows));
       ReportProgress(progress, "held-out lights", static_cast<double>(b + 1) / bands.count());
     }
     out.held_out = sums.Finish(StageClock() - start);

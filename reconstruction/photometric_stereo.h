@@ -162,8 +162,8 @@ double MeanNormalAngleDeg(const Image& a, const Image& b);
 // change is below options.near_tolerance_deg or after options.max_near_iterations rounds. A round
 // that changes the normals more than the one before is rejected (not converging): the previous
 // round is kept and at_height(its height, true) is called, so that what the caller renewed can
-// match the result again (the kept round's height is empty when no round was kept: the first
-// solve's plane). Fills height_mm, near_iterations and last_normal_change_deg of the result.
+// match the result again (the first round is never rejected, so a kept round always exists).
+// Fills height_mm, near_iterations and last_normal_change_deg of the result.
 // Used by RunPhotometricStereo, the cast-shadow marking and the banded pipeline (one sweep of
 // every band per solve_at).
 using AtRefinementHeight = std::function<void(const Image& height_mm, bool kept_round)>;
