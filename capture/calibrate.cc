@@ -158,12 +158,16 @@ void ChooseResultGrid(const Manifest& manifest, const CalibrationOptions& option
   if (sample_cameras.empty()) {
     for (const auto& camera : result.cameras) sample_cameras.push_back(camera.model);
   }
-  result.grid = ChooseGrid(sample_cameras, output, manifest_file);
+  result.surface_z_mm = SampleSurfaceZMm(manifest);
+  result.grid = ChooseGrid(sample_cameras, output, manifest_file, result.surface_z_mm);
   std::ostringstream detail;
   detail << result.grid.width << " x " << result.grid.height << " px at " << result.grid.dpi() << " dpi ("
          << result.grid.pitch_mm << " mm), top-left (" << result.grid.x0_mm << ", " << result.grid.y1_mm << ") mm"
          << (output.region_mm ? "" : ", region seen whole by every sample camera")
-         << (output.dpi ? "" : ", native resolution");
+         << (output.dpi ? "" : ", native resolution") << ", on the plane z = " << result.surface_z_mm << " mm"
+         << (manifest.sample.thickness_mm ? " (the sample's face: sample.thickness_mm)"
+                                          : " (no sample.thickness_mm: a thick sample's maps are off in scale and, "
+                                            "from a tilted camera, shifted)");
   record.Ran("grid", detail.str());
 }
 
@@ -368,7 +372,7 @@ void CalibrateFlats(const Manifest& manifest, const FrameLoader& load, const Cal
         CheckFlatBrighterThanSample(flat.rgb, spec, index, sample.rgb, manifest.frames[samples.front()]);
       }
       auto map_it = maps.find(spec.camera);
-      if (map_it == maps.end()) map_it = maps.emplace(spec.camera, BuildRectificationMap(camera->model, result.grid)).first;
+      if (map_it == maps.end()) map_it = maps.emplace(spec.camera, BuildRectificationMap(camera->model, result.grid, result.surface_z_mm)).first;
       const Image on_grid = RectifyImage(flat.rgb, map_it->second);
       Image irradiance = MeasuredIrradiance(on_grid, spec, light->model, result.grid,
                                             manifest.targets.white->reflectance, options.min_flat_cos);
@@ -567,7 +571,8 @@ nlohmann::json CalibrationResult::ToJson() const {
   out["manifest"] = manifest_file;
   out["grid"] = {{"width", grid.width},   {"height", grid.height}, {"dpi", grid.dpi()},
                  {"pitch_mm", grid.pitch_mm}, {"region_mm", {grid.x0_mm, grid.y1_mm - grid.height * grid.pitch_mm,
-                                                         grid.x0_mm + grid.width * grid.pitch_mm, grid.y1_mm}}};
+                                                         grid.x0_mm + grid.width * grid.pitch_mm, grid.y1_mm}},
+                 {"surface_z_mm", surface_z_mm}};
   out["cameras"] = json::array();
   for (const auto& c : cameras) {
     json rotation = json::array();
@@ -587,7 +592,7 @@ nlohmann::json CalibrationResult::ToJson() const {
     camera["reprojection_error_px"] = c.reprojection_error_px ? json(*c.reprojection_error_px) : json(nullptr);
     // Camera pixels per finished-map pixel at the grid's centre (rectification's s; > 1: the
     // footprint pre-filter runs). Sub-pixel structure resolves well from about 2 on.
-    const double pitch = c.model.PitchOnPlaneMm(grid.PixelCentreInWorld(grid.width / 2, grid.height / 2));
+    const double pitch = c.model.PitchOnPlaneMm(grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, surface_z_mm));
     camera["camera_px_per_map_px"] = pitch > 0.0 ? json(grid.pitch_mm / pitch) : json(nullptr);
     out["cameras"].push_back(camera);
   }
@@ -682,7 +687,7 @@ CalibrationResult Calibrate(const Capture& capture, const CalibrationOptions& op
 }
 
 Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const CalibrationResult& calibration,
-                 const CalibrationOptions& options, const ProgressCallback& progress) {
+                 const CalibrationOptions& options, const ProgressCallback& progress, const Image& surface_z_mm) {
   const auto sample_indices = FramesWith(manifest, FrameRole::kSample, nullptr, nullptr, &options.side);
   if (sample_indices.empty()) {
     throw InputError(calibration.manifest_file, "/frames", "sample frames of side \"" + options.side + "\"");
@@ -705,7 +710,9 @@ Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const Calibr
     if (!view_of_camera.count(spec.camera)) {
       view_of_camera[spec.camera] = static_cast<int>(stack.views.size());
       stack.views.push_back({spec.camera, camera->model.CentreInWorld()});
-      maps.emplace(spec.camera, BuildRectificationMap(camera->model, calibration.grid));
+      maps.emplace(spec.camera, surface_z_mm.empty()
+                                    ? BuildRectificationMap(camera->model, calibration.grid, calibration.surface_z_mm)
+                                    : BuildRectificationMap(camera->model, calibration.grid, surface_z_mm));
     }
     if (!light_of_id.count(*spec.light)) {
       light_of_id[*spec.light] = static_cast<int>(stack.lights.size());
@@ -735,10 +742,10 @@ Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const Calibr
 }
 
 Stack BuildStack(const Capture& capture, const CalibrationResult& calibration, const CalibrationOptions& options,
-                 const ProgressCallback& progress) {
+                 const ProgressCallback& progress, const Image& surface_z_mm) {
   return BuildStack(
       capture.manifest(), [&capture](std::size_t index) { return capture.LoadFrame(index); }, calibration, options,
-      progress);
+      progress, surface_z_mm);
 }
 
 }  // namespace u3mscan

@@ -111,6 +111,9 @@ struct ColourCalibration {
 struct CalibrationResult {
   std::string manifest_file;
   MetricGrid grid;
+  // The plane the grid lies in for the sample's frames (mm, SampleSurfaceZMm: the sample's face);
+  // the board, flats' targets and chart lie on z = 0.
+  double surface_z_mm = 0.0;
   std::vector<CameraCalibration> cameras;
   std::vector<LightCalibration> lights;  // manifest order
   DarkAmbient dark_ambient;
@@ -135,10 +138,14 @@ CalibrationResult Calibrate(const Manifest& manifest, const FrameLoader& load, c
 // One side's sample frames on the grid: dark/ambient taken away, rectified, divided by exposure and
 // the light's intensity, colour-corrected, flagged; measured irradiance where flats were taken.
 // Throws InputError when the side has no sample frames.
+// The grid lies on the plane z = calibration.surface_z_mm; with `surface_z_mm` (1 plane of the
+// grid's size, mm, world z: the relief, pipeline/relief_registration.h) every grid pixel is taken
+// at its own height instead, which registers a tilted view on the relief.
 Stack BuildStack(const Capture& capture, const CalibrationResult& calibration, const CalibrationOptions& options,
-                 const ProgressCallback& progress = {});
+                 const ProgressCallback& progress = {}, const Image& surface_z_mm = Image());
 Stack BuildStack(const Manifest& manifest, const FrameLoader& load, const CalibrationResult& calibration,
-                 const CalibrationOptions& options, const ProgressCallback& progress = {});
+                 const CalibrationOptions& options, const ProgressCallback& progress = {},
+                 const Image& surface_z_mm = Image());
 
 // The manifest's description of a light as a LightModel.
 LightModel LightModelFromSpec(const LightSpec& spec);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <opencv2/imgproc.hpp>
 
 #include "capture/opencv_bridge.h"
@@ -26,7 +27,7 @@ bool AllSee(const std::vector<CameraModel>& cameras, const Eigen::Vector3d& poin
 
 }  // namespace
 
-std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras) {
+std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras, double surface_z_mm) {
   // Start from the intersection of the footprints' bounding boxes, then pull in every side that
   // has a point some camera does not see, a small step at a time.
   double x0 = -1e300, y0 = -1e300, x1 = 1e300, y1 = 1e300;
@@ -41,7 +42,7 @@ std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras) {
                                         {camera.width - 1.0, t * (camera.height - 1)}};
       for (const auto& pixel : border) {
         Eigen::Vector3d p;
-        if (!camera.PixelToPlane(pixel, 0.0, &p)) continue;
+        if (!camera.PixelToPlane(pixel, surface_z_mm, &p)) continue;
         cx0 = std::min(cx0, p.x()), cx1 = std::max(cx1, p.x());
         cy0 = std::min(cy0, p.y()), cy1 = std::max(cy1, p.y());
       }
@@ -58,23 +59,26 @@ std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras) {
       }
       return true;
     };
-    if (!side_ok({x0, y0, 0}, {x0, y1, 0})) x0 += step, moved = true;
-    if (!side_ok({x1, y0, 0}, {x1, y1, 0})) x1 -= step, moved = true;
-    if (!side_ok({x0, y0, 0}, {x1, y0, 0})) y0 += step, moved = true;
-    if (!side_ok({x0, y1, 0}, {x1, y1, 0})) y1 -= step, moved = true;
+    const double z = surface_z_mm;
+    if (!side_ok({x0, y0, z}, {x0, y1, z})) x0 += step, moved = true;
+    if (!side_ok({x1, y0, z}, {x1, y1, z})) x1 -= step, moved = true;
+    if (!side_ok({x0, y0, z}, {x1, y0, z})) y0 += step, moved = true;
+    if (!side_ok({x0, y1, z}, {x1, y1, z})) y1 -= step, moved = true;
     if (!moved) return {x0, y0, x1, y1};
   }
   return {0, 0, 0, 0};
 }
 
+double SampleSurfaceZMm(const Manifest& manifest) { return manifest.sample.thickness_mm.value_or(0.0); }
+
 MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec& output,
-                      const std::string& manifest_file) {
+                      const std::string& manifest_file, double surface_z_mm) {
   std::array<double, 4> region{};
   if (output.region_mm) {
     region = *output.region_mm;
   } else {
     if (cameras.empty()) throw InputError(manifest_file, "/cameras", "at least one camera with sample frames");
-    region = CommonRegionMm(cameras);
+    region = CommonRegionMm(cameras, surface_z_mm);
     if (!(region[2] > region[0] && region[3] > region[1])) {
       throw InputError(manifest_file, "/output/region_mm",
                        "a region of the sample plane that every sample camera sees; the cameras share none");
@@ -88,7 +92,7 @@ MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec&
     dpi = *output.dpi;
     if (!(dpi > 0.0)) throw InputError(manifest_file, "/output/dpi", "a positive resolution in dots per inch");
   } else {
-    const Eigen::Vector3d centre(0.5 * (region[0] + region[2]), 0.5 * (region[1] + region[3]), 0.0);
+    const Eigen::Vector3d centre(0.5 * (region[0] + region[2]), 0.5 * (region[1] + region[3]), surface_z_mm);
     double finest_mm = 1e300;
     for (const auto& camera : cameras) {
       const double pitch = camera.PitchOnPlaneMm(centre);
@@ -109,7 +113,13 @@ MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec&
   return grid;
 }
 
-RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, double height_mm) {
+namespace {
+
+// The map of `camera` onto `grid`, each grid pixel centre at height z_mm(col, row) (mm, world).
+// The pre-filter strength is taken at the grid's centre, at height z_centre_mm.
+template <typename HeightAt>
+RectificationMap BuildMapAtHeights(const CameraModel& camera, const MetricGrid& grid, const HeightAt& z_mm,
+                                   double z_centre_mm) {
   RectificationMap result;
   result.grid = grid;
   result.map = Image(grid.width, grid.height, 2, 0.0f, grid.pitch_mm);
@@ -118,22 +128,39 @@ RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGr
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
         bool in_front = false;
-        const Eigen::Vector2d pixel =
-            camera.Project(grid.PixelCentreInWorld(col, static_cast<int>(row), height_mm), &in_front);
-        result.map.at(0, static_cast<int>(row), col) = static_cast<float>(pixel.x());
-        result.map.at(1, static_cast<int>(row), col) = static_cast<float>(pixel.y());
+        const int r = static_cast<int>(row);
+        const Eigen::Vector2d pixel = camera.Project(grid.PixelCentreInWorld(col, r, z_mm(col, r)), &in_front);
+        result.map.at(0, r, col) = static_cast<float>(pixel.x());
+        result.map.at(1, r, col) = static_cast<float>(pixel.y());
         const bool inside = in_front && pixel.x() >= 0.0 && pixel.y() >= 0.0 && pixel.x() <= camera.width - 1.0 &&
                             pixel.y() <= camera.height - 1.0;
         result.out_of_view[row * grid.width + col] = inside ? 0 : 1;
       }
     }
   });
-  const Eigen::Vector3d centre = grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, height_mm);
+  const Eigen::Vector3d centre = grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, z_centre_mm);
   const double camera_pitch = camera.PitchOnPlaneMm(centre);
   result.camera_px_per_grid_px = camera_pitch > 0.0 ? grid.pitch_mm / camera_pitch : 1.0;
+  return result;
+}
+
+}  // namespace
+
+RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, double height_mm) {
+  RectificationMap result = BuildMapAtHeights(camera, grid, [height_mm](int, int) { return height_mm; }, height_mm);
   result.crop_and_scale =
       !camera.HasDistortion() && (camera.pose.rotation - LookingStraightDownRotation()).cwiseAbs().maxCoeff() < 1e-9;
   return result;
+}
+
+RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, const Image& surface_z_mm) {
+  if (surface_z_mm.width() != grid.width || surface_z_mm.height() != grid.height || surface_z_mm.channels() != 1) {
+    throw std::invalid_argument("BuildRectificationMap: the surface heights must be one plane of the grid's size");
+  }
+  const double centre_z = surface_z_mm.at(0, grid.height / 2, grid.width / 2);
+  return BuildMapAtHeights(
+      camera, grid, [&surface_z_mm](int col, int row) { return static_cast<double>(surface_z_mm.at(0, row, col)); },
+      centre_z);
 }
 
 namespace {

@@ -23,11 +23,20 @@ namespace u3mscan {
 // the largest axis-aligned rectangle every camera sees whole). The grid keeps the region's
 // top-left corner; its size is the whole number of pixels that fit. Throws InputError (field
 // /output) when the region is empty or the cameras share no view of the plane.
+// `surface_z_mm`: the plane the maps lie in, the sample's face (its thickness above the z = 0
+// table plane, SampleSurfaceZMm); the default region and resolution are taken there.
 MetricGrid ChooseGrid(const std::vector<CameraModel>& cameras, const OutputSpec& output,
-                      const std::string& manifest_file = "capture.json");
+                      const std::string& manifest_file = "capture.json", double surface_z_mm = 0.0);
 
-// The rectangle [x0, y0, x1, y1] (mm, z = 0) that every camera sees whole.
-std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras);
+// The rectangle [x0, y0, x1, y1] (mm) of the plane z = surface_z_mm that every camera sees whole.
+std::array<double, 4> CommonRegionMm(const std::vector<CameraModel>& cameras, double surface_z_mm = 0.0);
+
+// The plane the sample's face lies in (mm above the z = 0 plane the sample rests on, where the
+// board, flats and chart lie): the manifest's sample.thickness_mm, 0 when it is not given. A
+// camera D mm above sees a face t mm up at a scale off by t / (D - t) and, when it is tilted by
+// theta, shifted by t tan(theta): maps made on z = 0 would be misregistered by that much
+// (docs/calibration.md, "Grid").
+double SampleSurfaceZMm(const Manifest& manifest);
 
 // How camera pixels are interpolated at a grid pixel's centre (cv::remap). Results are clamped
 // at 0 (the ringing of the cubic and Lanczos kernels next to dark edges cannot make light
@@ -48,8 +57,13 @@ struct RectificationMap {
   RectifyInterpolation interpolation = kDefaultRectifyInterpolation;
 };
 
-// `height_mm`: the plane the map is computed for (0 = the sample plane).
+// `height_mm`: the plane the map is computed for (the sample's face, SampleSurfaceZMm, for the
+// frames of the sample stack; 0 for targets lying on the table).
 RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, double height_mm = 0.0);
+// The same with a height per grid pixel (`surface_z_mm`: 1 plane of the grid's size, mm, world z):
+// the relief's own parallax taken out, which a tilted view needs (a relief of 0.2 mm seen at 60 deg
+// moves by 0.35 mm). Never a crop and scale. Throws std::invalid_argument on a size mismatch.
+RectificationMap BuildRectificationMap(const CameraModel& camera, const MetricGrid& grid, const Image& surface_z_mm);
 
 struct RectifiedFrame {
   Image rgb;                          // grid size, pitch_mm = grid pitch

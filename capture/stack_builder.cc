@@ -48,11 +48,11 @@ struct BandMap {
   int y0 = 0, rows = 0;  // camera rows to read
 };
 
-BandMap MakeBandMap(const CameraModel& camera, const MetricGrid& full, const MetricGrid& band) {
+BandMap MakeBandMap(const CameraModel& camera, const MetricGrid& full, const MetricGrid& band, double surface_z_mm) {
   BandMap out;
-  out.map = BuildRectificationMap(camera, band);
+  out.map = BuildRectificationMap(camera, band, surface_z_mm);
   // The pre-filter strength is the whole grid's (measured at its centre), as in BuildStack.
-  const Eigen::Vector3d centre = full.PixelCentreInWorld(full.width / 2, full.height / 2);
+  const Eigen::Vector3d centre = full.PixelCentreInWorld(full.width / 2, full.height / 2, surface_z_mm);
   const double camera_pitch = camera.PitchOnPlaneMm(centre);
   out.map.camera_px_per_grid_px = camera_pitch > 0.0 ? full.pitch_mm / camera_pitch : 1.0;
   float lo = static_cast<float>(camera.height - 1), hi = 0.0f;
@@ -131,7 +131,7 @@ Stack BuildStackRows(const Capture& capture, const CalibrationResult& calibratio
     if (!view_of_camera.count(spec.camera)) {
       view_of_camera[spec.camera] = static_cast<int>(stack.views.size());
       stack.views.push_back({spec.camera, camera->model.CentreInWorld()});
-      maps.emplace(spec.camera, MakeBandMap(camera->model, calibration.grid, stack.grid));
+      maps.emplace(spec.camera, MakeBandMap(camera->model, calibration.grid, stack.grid, calibration.surface_z_mm));
     }
     if (!light_of_id.count(*spec.light)) {
       light_of_id[*spec.light] = static_cast<int>(stack.lights.size());

@@ -32,6 +32,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
     std::string format = "dng";
     bool no_calibration = false;
     bool no_pose = false;
+    bool no_thickness = false;
     std::string calibration_roles = "all";
     std::string out;
   };
@@ -54,6 +55,9 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
                  "(dark,flat: a scanner whose geometry and colour the manifest gives, with a flat field per light)")
       ->capture_default_str();
   sub.add_flag("--no-pose", args->no_pose, "Leave camera poses out of capture.json (calibration finds them from the board)");
+  sub.add_flag("--no-thickness", args->no_thickness,
+               "Leave sample.thickness_mm out of capture.json (the maps are then made on the table plane z = 0, not "
+               "on the sample's face)");
   sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();
   return std::function<int()>([args] {
     ParseSize(args->size, &args->options.width, &args->options.height);
@@ -64,6 +68,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
     args->options.capture.calibration_roles =
         synthetic::CalibrationRolesFromList(args->calibration_roles, "--calibration-frames");
     args->options.capture.write_pose = !args->no_pose;
+    args->options.capture.write_thickness = !args->no_thickness;
     ProgressBar bar(GetLogLevel() > LogLevel::kInfo);
     args->options.capture.progress = bar.Callback();
     const synthetic::CaptureStats stats = synthetic::RunSynth(args->options, args->out);

@@ -148,6 +148,11 @@ Manifest BuildManifest(const SceneTruth& scene, const Rig& rig, const CaptureOpt
   m.scanner = {"u3mscan", "synthetic " + rig.name, "seed " + std::to_string(rig.seed), options.scanner_software, json::object()};
   m.sample.name = scene.name;
   m.sample.description = "synthetic scene '" + scene.name + "' rendered with rig '" + rig.name + "'";
+  if (options.write_thickness) {
+    float top = 0.0f;
+    for (float h : scene.height_mm.plane(0)) top = std::max(top, h);
+    if (top > 0.0f) m.sample.thickness_mm = static_cast<double>(top);
+  }
   // The maps cover exactly the sample's truth grid, so finished maps and truth maps align pixel for pixel.
   const double half_w = 0.5 * scene.height_mm.width() * scene.pitch_mm, half_h = 0.5 * scene.height_mm.height() * scene.pitch_mm;
   m.output.dpi = PitchMmToDpi(scene.pitch_mm);

@@ -59,6 +59,10 @@ struct CaptureOptions {
   // Backlight frames are written only for scenes with holes, whatever is asked.
   std::set<FrameRole> calibration_roles = AllCalibrationRoles();
   bool write_pose = true;          // false: cameras without pose, calibration must find it (board)
+  // sample.thickness_mm = the scene's highest point, as a thickness gauge reads it: the pipeline
+  // makes its maps on that plane (capture/rectification.h, SampleSurfaceZMm). false: left out, the
+  // maps lie on z = 0 (a scanner that does not know how thick the sample is).
+  bool write_thickness = true;
   // Rays per camera pixel along each axis for the sample frames (RenderOptions::supersample).
   int supersample = 1;
   std::string scanner_software = "u3mscan";

@@ -15,6 +15,7 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/scene.h"
+#include "tests/support/image_shift.h"
 
 namespace u3mscan {
 namespace {
@@ -53,9 +54,10 @@ struct Written {
   }
 };
 
-// A capture of the named rig with its first `lights` lights (fewer frames: seconds, not minutes).
-std::unique_ptr<Written> WriteCapture(const std::string& rig_name, synthetic::FrameFormat format, int width,
-                                      int height, double pitch_mm, std::size_t lights, bool write_pose) {
+// A capture of `scene` with the named rig and its first `lights` lights (fewer frames: seconds, not minutes).
+std::unique_ptr<Written> WriteScene(const synthetic::SceneTruth& scene, const std::string& rig_name,
+                                    int width, int height, double pitch_mm, std::size_t lights,
+                                    const synthetic::CaptureOptions& options) {
   auto written = std::make_unique<Written>();
   written->root = fs::temp_directory_path() / ("u3mscan_calib_synth_" + rig_name + "_" + std::to_string(::getpid()));
   fs::remove_all(written->root);
@@ -66,11 +68,16 @@ std::unique_ptr<Written> WriteCapture(const std::string& rig_name, synthetic::Fr
   rig_options.seed = 5;
   written->rig = synthetic::MakeRig(rig_name, rig_options);
   if (written->rig.lights.size() > lights) written->rig.lights.resize(lights);
+  WriteSyntheticCapture(scene, written->rig, options, written->root);
+  return written;
+}
+
+std::unique_ptr<Written> WriteCapture(const std::string& rig_name, synthetic::FrameFormat format, int width,
+                                      int height, double pitch_mm, std::size_t lights, bool write_pose) {
   synthetic::CaptureOptions options;
   options.format = format;
   options.write_pose = write_pose;
-  WriteSyntheticCapture(FlatWhiteScene(200, 150, 0.25), written->rig, options, written->root);
-  return written;
+  return WriteScene(FlatWhiteScene(200, 150, 0.25), rig_name, width, height, pitch_mm, lights, options);
 }
 
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
@@ -239,6 +246,62 @@ TEST(SyntheticCapture, ObliqueRigBothViewsOnOneGrid) {
             << albedo[1] / count[1] << " (truth " << kAlbedo << ")\n";
   EXPECT_NEAR(albedo[0] / count[0], kAlbedo, 0.02);
   EXPECT_NEAR(albedo[1] / count[1], kAlbedo, 0.02);
+}
+
+// A sample 1 mm thick seen by
+// the top camera and the oblique one (about 60 deg): a flat face lifted 1 mm off the table, printed
+// with cells of random albedo. The synthetic scanner writes its thickness;
+// the maps are made on the sample's face, so the two views' images of one light register on the
+// grid. Made on the table plane z = 0 instead (thickness left out of the manifest), the oblique
+// view is shifted by t tan(theta), 6-9 grid pixels: that misregistration is what the plane
+// removes.
+constexpr double kThickSampleMm = 1.0;
+constexpr double kMaxViewRegistrationPx = 0.1;   // grid px, between the views on the sample's face (measured 0.02)
+constexpr double kMinTableShiftPx = 4.0;         // grid px, with the maps on z = 0 (4 tan(55..65 deg) = 5.7..8.6)
+
+synthetic::SceneTruth RaisedPrintScene(int width, int height, double pitch_mm) {
+  synthetic::SceneTruth s = FlatWhiteScene(width, height, pitch_mm);
+  s.name = "raised print";
+  for (float& h : s.height_mm.plane(0)) h = static_cast<float>(kThickSampleMm);
+  testing::PaintRandomPrint(&s.base_color, 4, 0.15f, 0.7f);
+  return s;
+}
+
+// Shift of the oblique view's image of the (one) light against the top view's.
+Eigen::Vector2d ObliqueShiftPx(const Stack& stack) {
+  const Observation* views[2] = {nullptr, nullptr};
+  for (const Observation& o : stack.observations) {
+    if (o.view >= 0 && o.view < 2) views[o.view] = &o;
+  }
+  if (!views[0] || !views[1]) return Eigen::Vector2d::Constant(1e9);
+  return testing::ShiftPx(views[0]->rgb, views[1]->rgb, testing::CentralHalf(views[0]->rgb));
+}
+
+TEST(SyntheticCapture, ObliqueViewRegistersOnTheFaceOfAThickSample) {
+  synthetic::CaptureOptions options;
+  options.format = synthetic::FrameFormat::kExr;
+  options.calibration_frames = false;  // geometry from the manifest: only the plane is under test
+  const auto written = WriteScene(RaisedPrintScene(200, 150, 0.25), "oblique", 320, 240, 0.25, 1, options);
+  const Capture capture = Capture::Open(written->root / synthetic::kCaptureSubdir);
+  ASSERT_TRUE(capture.manifest().sample.thickness_mm);
+  EXPECT_NEAR(*capture.manifest().sample.thickness_mm, kThickSampleMm, 1e-6);
+
+  const CalibrationResult on_face = Calibrate(capture, CalibrationOptions{});
+  EXPECT_NEAR(on_face.surface_z_mm, kThickSampleMm, 1e-6);
+  EXPECT_NEAR(on_face.ToJson()["grid"]["surface_z_mm"].get<double>(), kThickSampleMm, 1e-6);
+  const Eigen::Vector2d face_shift = ObliqueShiftPx(BuildStack(capture, on_face, CalibrationOptions{}));
+
+  Manifest without = capture.manifest();
+  without.sample.thickness_mm.reset();
+  const FrameLoader load = [&capture](std::size_t index) { return capture.LoadFrame(index); };
+  const CalibrationResult on_table = Calibrate(without, load, CalibrationOptions{});
+  EXPECT_EQ(on_table.surface_z_mm, 0.0);
+  const Eigen::Vector2d table_shift = ObliqueShiftPx(BuildStack(without, load, on_table, CalibrationOptions{}));
+
+  std::cout << "measured: oblique view against the top view, maps on the sample's face " << face_shift.transpose()
+            << " px, on the table plane " << table_shift.transpose() << " px\n";
+  EXPECT_LT(face_shift.norm(), kMaxViewRegistrationPx);
+  EXPECT_GT(table_shift.norm(), kMinTableShiftPx);
 }
 
 }  // namespace
