@@ -14,6 +14,7 @@
 #include "pipeline/height_reliability.h"
 #include "pipeline/held_out_lights.h"
 #include "pipeline/material_writer.h"
+#include "pipeline/relief_registration.h"
 #include "pipeline/stages.h"
 #include "pipeline/tiled_side.h"
 #include "pipeline/tiles.h"
@@ -101,7 +102,8 @@ nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptio
                           {"solver", options.solver.empty() ? "preset" : options.solver},
                           {"integrator", options.integrator.empty() ? "preset" : options.integrator},
                           {"fit_mode", options.fit_mode.empty() ? "preset" : options.fit_mode},
-                          {"dpi", prepared.calibration.grid.dpi()}};
+                          {"dpi", prepared.calibration.grid.dpi()},
+                          {"surface_z_mm", prepared.calibration.surface_z_mm}};
   nlohmann::json cameras = nlohmann::json::array();
   for (const auto& camera : prepared.calibration.cameras) {
     nlohmann::json c = {{"id", camera.id}, {"intrinsics_source", camera.intrinsics_source}, {"pose_source", camera.pose_source}};
@@ -261,7 +263,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       const std::size_t index = backlight.front();
       const CameraCalibration* camera = prepared.calibration.FindCamera(prepared.capture.frame(index).camera);
       if (!camera) throw std::logic_error("calibration lacks camera " + prepared.capture.frame(index).camera);
-      const RectificationMap map = BuildRectificationMap(camera->model, grid);
+      const RectificationMap map = BuildRectificationMap(camera->model, grid, prepared.calibration.surface_z_mm);
       const RectifiedFrame rectified = Rectify(prepared.capture.LoadFrame(index), map);
       AlphaEstimate estimate = AlphaFromBacklight(rectified.rgb, rectified.flags);
       alpha = std::move(estimate.alpha);
@@ -290,17 +292,36 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       std::vector<Observation> held_out;
       if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
-      reconstruction = ReconstructSide(&stack, stages, alpha, &report, progress);
-      fit = FitSide(stack, reconstruction, stages, &report, progress);
+      StageOptions side_stages = stages;
+      const bool tilted_view = NeedsReliefRegistration(stack);
+      if (tilted_view) {
+        stack = BuildSideStackOnRelief(prepared, side, stages, alpha, std::move(stack), &report, progress);
+        if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
+        UseTheMostVerticalViewForNormals(stack, &side_stages);
+      }
+      reconstruction = ReconstructSide(&stack, side_stages, alpha, &report, progress);
+      fit = FitSide(stack, reconstruction, side_stages, &report, progress);
       const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
                                     [](const LightModel& l) { return l.type == LightType::kPoint; });
       fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
+      if (tilted_view) {
+        report.steps.push_back({"integration of the fitted normals", false,
+                                "a tilted view: the normals written are the most vertical view's photometric stereo "
+                                "(refined against the tilted view's observations they bend; docs/process.md)",
+                                0.0});
+      }
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
       if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
       TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);
+      if (NeedsReliefRegistration(tiled.sample)) {
+        report.steps.push_back({"relief registration " + side, false,
+                                "processed in bands: the tilted views are rectified on the plane of the sample's face "
+                                "only, not at the relief's heights (docs/process.md, Large scans)",
+                                0.0});
+      }
       stack = std::move(tiled.sample);
       reconstruction = std::move(tiled.reconstruction);
       fit = std::move(tiled.fit);

@@ -162,13 +162,13 @@ std::vector<std::size_t> CheckSideStack(const PreparedCapture& prepared, const s
 }
 
 Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
-                     RunReport* report, const ProgressCallback& progress) {
+                     RunReport* report, const ProgressCallback& progress, const Image& surface_z_mm) {
   const double start = StageClock();
   CalibrationOptions calibration_options = options.calibration;
   calibration_options.side = side;
-  Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress);
+  Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress, surface_z_mm);
   CheckSideStack(prepared, side, options, &stack, report);
-  report->steps.push_back({"rectify " + side, true,
+  report->steps.push_back({"rectify " + side + (surface_z_mm.empty() ? "" : " on the relief"), true,
                            std::to_string(stack.observations.size()) + " observations on a " +
                                std::to_string(stack.grid.width) + "x" + std::to_string(stack.grid.height) + " grid",
                            StageClock() - start});

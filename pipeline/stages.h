@@ -39,8 +39,9 @@ PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOp
 std::vector<std::size_t> CheckSideStack(const PreparedCapture& prepared, const std::string& side,
                                         const StageOptions& options, Stack* stack, RunReport* report);
 
+// `surface_z_mm`: heights of the relief (BuildStack); empty: the plane of the sample's face.
 Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
-                     RunReport* report, const ProgressCallback& progress = {});
+                     RunReport* report, const ProgressCallback& progress = {}, const Image& surface_z_mm = Image());
 
 struct SideReconstruction {
   reconstruction::PhotometricStereoResult photometric_stereo;

@@ -1,0 +1,157 @@
+// Registration of a tilted view on the sample's relief (pipeline/relief_registration.h): a print on
+// bumps of +-0.2 mm, seen by the top camera and the oblique one (about 60 deg). On the plane of the
+// sample's face (its highest point) the oblique view's pixels move with the relief, by up to
+// 0.4 mm tan(60 deg) = 2.8 grid pixels; rectified at the heights the top view's reconstruction
+// gives, both views register.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <iostream>
+
+#include "datasets_synthetic/capture_writer.h"
+#include "datasets_synthetic/rig.h"
+#include "pipeline/presets.h"
+#include "pipeline/relief_registration.h"
+#include "pipeline/stages.h"
+#include "tests/support/bump_scene.h"
+#include "tests/support/image_shift.h"
+#include "tests/support/temp_dir.h"
+
+namespace u3mscan {
+namespace {
+
+constexpr double kPitchMm = 0.25;
+constexpr double kLiftMm = 0.5;       // the bumps' mean height above the table
+constexpr double kAmplitudeMm = 0.2;  // bumps +-0.2 mm
+constexpr double kPeriodMm = 25.0;    // gentle slopes (3 deg at most): integration is not what is tested
+constexpr int kPatchPx = 24;
+// Worst patch registered on the relief (measured 0.31: the top view's heights are off by ~0.04 mm
+// in places, 6 near lights at 1x), and on the face's plane (measured 2.9: a point 0.4 mm below the
+// face, seen at 55-65 deg).
+constexpr double kMaxShiftOnReliefPx = 0.5;
+constexpr double kMinShiftOnPlanePx = 1.5;
+
+// Worst shift (grid px) between the top view's and the oblique view's image of the first light,
+// over patches of kPatchPx tiling the grid's interior.
+double WorstPatchShiftPx(const Stack& stack, int top) {
+  const Observation* views[2] = {nullptr, nullptr};
+  for (const Observation& o : stack.observations) {
+    if (o.light != stack.observations.front().light) continue;
+    views[o.view == top ? 0 : 1] = &o;
+  }
+  if (!views[0] || !views[1]) return 1e9;
+  double worst = 0.0;
+  const int margin = 16;
+  for (int row0 = margin; row0 + kPatchPx <= stack.grid.height - margin; row0 += kPatchPx) {
+    for (int col0 = margin; col0 + kPatchPx <= stack.grid.width - margin; col0 += kPatchPx) {
+      const testing::PixelRect patch{col0, row0, kPatchPx, kPatchPx};
+      worst = std::max(worst, testing::ShiftPx(views[0]->rgb, views[1]->rgb, patch, 6).norm());
+    }
+  }
+  return worst;
+}
+
+TEST(ReliefRegistration, ObliqueViewRegistersOnTheReliefNotOnlyOnTheFacePlane) {
+  test::TempDir dir;
+  synthetic::SceneTruth scene = testing::BumpScene(200, 150, kPitchMm, kAmplitudeMm, kPeriodMm);
+  for (float& h : scene.height_mm.plane(0)) h += static_cast<float>(kLiftMm);
+  testing::PaintRandomPrint(&scene.base_color, 4, 0.15f, 0.7f);
+  for (float& s : scene.specular.plane(0)) s = 0.0f;
+  synthetic::RigOptions rig_options;
+  rig_options.width = 320;
+  rig_options.height = 240;
+  rig_options.pitch_mm = kPitchMm;
+  rig_options.seed = 5;
+  rig_options.lights = 6;
+  const synthetic::Rig rig = synthetic::MakeRig("oblique", rig_options);
+  synthetic::CaptureOptions capture_options;
+  capture_options.format = synthetic::FrameFormat::kExr;
+  capture_options.calibration_frames = false;
+  synthetic::WriteSyntheticCapture(scene, rig, capture_options, dir / "c");
+
+  StageOptions options = OptionsForPreset(Preset::kFast);
+  RunReport report;
+  PreparedCapture prepared = PrepareCapture(dir / "c" / synthetic::kCaptureSubdir, options, &report);
+  EXPECT_NEAR(prepared.calibration.surface_z_mm, kLiftMm + kAmplitudeMm, 0.01);
+  Stack on_plane = BuildSideStack(prepared, "front", options, &report);
+  ASSERT_TRUE(NeedsReliefRegistration(on_plane));
+  const int top = MostVerticalView(on_plane);
+  ASSERT_GE(top, 0);
+  EXPECT_EQ(on_plane.views[static_cast<std::size_t>(top)].camera_id, "top");
+  const double plane_shift = WorstPatchShiftPx(on_plane, top);
+
+  const Stack on_relief = BuildSideStackOnRelief(prepared, "front", options, Image(), std::move(on_plane), &report);
+  const double relief_shift = WorstPatchShiftPx(on_relief, top);
+  const bool reported = std::any_of(report.steps.begin(), report.steps.end(),
+                                    [](const StepRecord& s) { return s.name == "relief registration front" && s.ran; });
+  EXPECT_TRUE(reported);
+  std::cout << "measured: worst patch shift between the views, face plane " << plane_shift << " px, relief "
+            << relief_shift << " px\n";
+  EXPECT_GT(plane_shift, kMinShiftOnPlanePx);
+  EXPECT_LT(relief_shift, kMaxShiftOnReliefPx);
+}
+
+TEST(ReliefRegistration, TopHeightLandsOnTheFaceAndOneViewNeedsNone) {
+  Image h(4, 1, 1, 0.0f, 1.0);
+  const float heights[4] = {-0.2f, 0.0f, 0.1f, 0.3f};
+  for (int c = 0; c < 4; ++c) h.at(0, 0, c) = heights[c];
+  const Image z = ReliefHeightsMm(h, Image(), 1.0);
+  EXPECT_FLOAT_EQ(z.at(0, 0, 3), 1.0f);   // the top on the face
+  EXPECT_FLOAT_EQ(z.at(0, 0, 0), 0.5f);   // 0.5 mm below it
+  Image valid(4, 1, 1, 1.0f, 1.0);
+  valid.at(0, 0, 3) = 0.0f;                // a hole: not the top
+  EXPECT_FLOAT_EQ(ReliefHeightsMm(h, valid, 1.0).at(0, 0, 2), 1.0f);
+
+  Stack one;
+  one.grid = {8, 8, 0.1, -0.4, 0.4};
+  one.views.push_back({"top", Eigen::Vector3d(0, 0, 300)});
+  EXPECT_FALSE(NeedsReliefRegistration(one));
+  one.views.push_back({"side", Eigen::Vector3d(0, -150, 260)});  // 30 deg
+  EXPECT_TRUE(NeedsReliefRegistration(one));
+  EXPECT_EQ(MostVerticalView(one), 0);
+  EXPECT_NEAR(ViewTiltDeg(one, 1), 30.0, 0.1);
+}
+
+// A wall 1 mm high along a column, a camera tilted 45 deg from the high side: the floor behind the
+// wall is hidden for 1 mm (10 px at 0.1 mm) in that view only.
+TEST(ReliefRegistration, WhatATiltedViewCannotSeeIsOutOfView) {
+  constexpr int kWallCol = 8;
+  constexpr double kPitch = 0.1;
+  Stack stack;
+  stack.grid = {32, 4, kPitch, 0.0, 0.4};
+  stack.views.push_back({"top", Eigen::Vector3d(1.6, 0.2, 300)});
+  stack.views.push_back({"oblique", Eigen::Vector3d(1.6 - 212.0, 0.2, 212.0)});  // 45 deg toward -x
+  stack.lights.push_back(LightModel{});
+  for (int v = 0; v < 2; ++v) {
+    Observation o;
+    o.view = v;
+    o.rgb = Image(32, 4, 3, 0.5f, kPitch);
+    stack.observations.push_back(o);
+  }
+  Image z(32, 4, 1, 0.0f, kPitch);
+  for (int row = 0; row < 4; ++row) {
+    for (int col = 0; col < kWallCol; ++col) z.at(0, row, col) = 1.0f;
+  }
+  const double share = MarkHiddenFromTiltedViews(z, &stack);
+  const Observation& top = stack.observations[0];
+  const Observation& oblique = stack.observations[1];
+  for (int row = 0; row < 4; ++row) {
+    for (int col = 0; col < 32; ++col) {
+      const std::size_t i = static_cast<std::size_t>(row) * 32 + col;
+      if (!top.flags.empty()) {
+        EXPECT_EQ(top.flags[i], 0) << col;
+      }
+      const bool hidden = (oblique.flags[i] & kOutOfView) != 0;
+      if (col > kWallCol && col < kWallCol + 9) {
+        EXPECT_TRUE(hidden) << col;  // within 1 mm behind the wall
+      }
+      if (col < kWallCol || col > kWallCol + 11) {
+        EXPECT_FALSE(hidden) << col;  // on the wall, or past what it hides
+      }
+    }
+  }
+  EXPECT_NEAR(share, 10.0 / 32.0, 2.0 / 32.0);
+}
+
+}  // namespace
+}  // namespace u3mscan
