@@ -236,7 +236,10 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   request.weight_gsm = manifest.sample.weight_gsm;
   request.vendor_key = manifest.scanner.vendor.empty() ? std::string(kOwnVendorKey) : manifest.scanner.vendor;
   if (!(request.thickness_mm && request.weight_gsm)) {
-    report.steps.push_back({"physics", false, "the manifest gives no thickness and weight", 0.0});
+    const char* reason = request.thickness_mm ? "U3M physics needs the sample's weight too (sample.weight_gsm)"
+                         : request.weight_gsm ? "U3M physics needs the sample's thickness too (sample.thickness_mm)"
+                                              : "the manifest gives no thickness and weight";
+    report.steps.push_back({"physics", false, reason, 0.0});
   }
 
   struct DebugMaps {
