@@ -307,23 +307,23 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
                                     [](const LightModel& l) { return l.type == LightType::kPoint; });
       fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
-      if (tilted_view) {
-        report.steps.push_back({"integration of the fitted normals", false,
-                                "a tilted view: the normals written are the most vertical view's photometric stereo "
-                                "(refined against the tilted view's observations they bend; docs/process.md)",
-                                0.0});
-      }
+      if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
       if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
-      TiledSide tiled = ProcessSideTiled(prepared, side, stages, plan, alpha, kResidualObservations,
+      StageOptions side_stages = stages;
+      const Stack views = SideViews(prepared, side);
+      const bool tilted_view = NeedsReliefRegistration(views);
+      if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
+      TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);
-      if (NeedsReliefRegistration(tiled.sample)) {
+      if (tilted_view) {
         report.steps.push_back({"relief registration " + side, false,
                                 "processed in bands: the tilted views are rectified on the plane of the sample's face "
                                 "only, not at the relief's heights (docs/process.md, Large scans)",
                                 0.0});
+        report.steps.push_back(TiltedViewNormalsStep());
       }
       stack = std::move(tiled.sample);
       reconstruction = std::move(tiled.reconstruction);

@@ -62,6 +62,28 @@ void UseTheMostVerticalViewForNormals(const Stack& stack, StageOptions* options)
   options->fit.refine_pixel_normals = false;
 }
 
+StepRecord TiltedViewNormalsStep() {
+  return {"integration of the fitted normals", false,
+          "a tilted view: the normals written are the most vertical view's photometric stereo (refined against the "
+          "tilted view's observations they bend; docs/process.md, Relief registration)",
+          0.0};
+}
+
+Stack SideViews(const PreparedCapture& prepared, const std::string& side) {
+  Stack views;
+  views.side = side;
+  views.grid = prepared.calibration.grid;
+  const Manifest& manifest = prepared.capture.manifest();
+  for (const FrameSpec& spec : manifest.frames) {
+    if (spec.role != FrameRole::kSample || spec.side != side) continue;
+    const bool known = std::any_of(views.views.begin(), views.views.end(),
+                                   [&spec](const ViewGeometry& v) { return v.camera_id == spec.camera; });
+    const CameraCalibration* camera = prepared.calibration.FindCamera(spec.camera);
+    if (!known && camera) views.views.push_back({spec.camera, camera->model.CentreInWorld()});
+  }
+  return views;
+}
+
 double MarkHiddenFromTiltedViews(const Image& surface_z_mm, Stack* stack) {
   const std::size_t pixels = static_cast<std::size_t>(stack->grid.width) * stack->grid.height;
   // One "light" per tilted view, at its camera's centre: what it cannot light, the camera cannot see.

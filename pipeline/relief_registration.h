@@ -55,6 +55,14 @@ double MarkHiddenFromTiltedViews(const Image& surface_z_mm, Stack* stack);
 // plain 145 -> 8 % of the range).
 void UseTheMostVerticalViewForNormals(const Stack& stack, StageOptions* options);
 
+// The report's step for the fitted normals a capture with a tilted view does not use.
+StepRecord TiltedViewNormalsStep();
+
+// The grid and the views (no observations) of a side's stack, in the order BuildStack gives them
+// (cameras by their first sample frame of the side): for decisions taken before any stack is built
+// (scans in bands).
+Stack SideViews(const PreparedCapture& prepared, const std::string& side);
+
 // The side's stack built again on the relief: `on_plane` (BuildSideStack on the face's plane,
 // held-out observations already taken out) is reconstructed from its most vertical view alone, and
 // the frames are read and rectified again at the heights that gives (ReliefHeightsMm), and what
