@@ -291,16 +291,19 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     Image residual;
     double residual_mean = 0.0;
     std::optional<HeldOutCheck> held_out_check;
+    // A tilted view: its frames registered on the relief (one band) and the normals taken from the
+    // most vertical view (relief_registration.h). Decided from the cameras, before any stack.
+    StageOptions side_stages = stages;
+    const Stack views = SideViews(prepared, side);
+    const bool tilted_view = NeedsReliefRegistration(views);
+    if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       std::vector<Observation> held_out;
       if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
-      StageOptions side_stages = stages;
-      const bool tilted_view = NeedsReliefRegistration(stack);
       if (tilted_view) {
         stack = BuildSideStackOnRelief(prepared, side, stages, alpha, std::move(stack), &report, progress);
         if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
-        UseTheMostVerticalViewForNormals(stack, &side_stages);
       }
       reconstruction = ReconstructSide(&stack, side_stages, alpha, &report, progress);
       fit = FitSide(stack, reconstruction, side_stages, &report, progress);
@@ -311,10 +314,6 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
       if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
-      StageOptions side_stages = stages;
-      const Stack views = SideViews(prepared, side);
-      const bool tilted_view = NeedsReliefRegistration(views);
-      if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
       TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);

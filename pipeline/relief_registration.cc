@@ -134,7 +134,11 @@ Stack BuildSideStackOnRelief(const PreparedCapture& prepared, const std::string&
   float lo = 1e30f, hi = -1e30f;
   for (float v : z.plane(0)) lo = std::min(lo, v), hi = std::max(hi, v);
   const double reconstruct_seconds = StageClock() - start;
-  Stack stack = BuildSideStack(prepared, side, options, report, progress, z);
+  // The same frames pass the same checks again: their warnings are in the report already, from
+  // the build on the face's plane; only the step is kept.
+  RunReport rebuild;
+  Stack stack = BuildSideStack(prepared, side, options, &rebuild, progress, z);
+  report->steps.insert(report->steps.end(), rebuild.steps.begin(), rebuild.steps.end());
   const double hidden = MarkHiddenFromTiltedViews(z, &stack);
   char detail[300];
   std::snprintf(detail, sizeof detail,
