@@ -316,12 +316,15 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
       }
     }
   }
-  // Oblique camera (top + oblique view): sheen becomes measurable. Full: velvet, every preset;
-  // quick: plain, fast (against plain/near/fast: the time the second view costs).
+  // Oblique camera (top + oblique view): sheen becomes measurable. Full: velvet, every preset, and
+  // the velvet's material on a smooth relief (velvet_bumps: the sheen the chain recovers where one
+  // normal per pixel describes the surface, against the pile's); quick: plain, fast (against
+  // plain/near/fast: the time the second view costs).
   if (quick) {
     add({"plain", "oblique", base, 0, true, "fast", "", "", "matrix", "", ""});
   } else {
     for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix", "", ""});
+    add({"velvet_bumps", "oblique", base, 0, true, "balanced", "", "", "matrix", "", ""});
   }
   // Methods on the same captures: ls vs robust photometric stereo, dct vs robust integration,
   // clusters vs per-pixel fitting, against the balanced run (robust + dct + per-pixel).

@@ -251,6 +251,13 @@ const std::map<std::string, Preset>& Presets() {
                             [](const SceneOptions&) { return MakeFlat(Uniform(0.5f, 1.0f, 0.0f)); }};
     p["sphere_cap"] = {"one spherical cap centred on the grid: closed-form normals",
                        [](const SceneOptions& o) { return MakeSphereCap(Uniform(0.5f, 1.0f, 0.0f), o); }};
+    p["velvet_bumps"] = {"the velvet's material, uniform, on the egg-crate bumps: every lobe of the velvet on a "
+                         "smooth relief (one normal per pixel holds)",
+                         [](const SceneOptions&) {
+                           YarnMaterial m = VelvetSpec().pile;
+                           m.thread_color_variation = m.fibre_color_variation = m.thread_roughness_variation = 0.0f;
+                           return MakeBumps(m);
+                         }};
     p["bumps"] = {"egg-crate bumps, period 2 mm, 0.3 mm deep: closed-form normals",
                   [](const SceneOptions&) { return MakeBumps(Uniform(0.5f, 1.0f, 0.0f)); }};
     return p;

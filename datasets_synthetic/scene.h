@@ -91,7 +91,7 @@ struct SceneOptions {
 
 // Names accepted by MakeScene: plain, twill, satin, knit, denim, velvet, lace, and the extreme and
 // analytic presets (dark, bright, mirror, pure_velvet, holes, flat_lambertian, sphere_cap, bumps,
-// velvet_mismatch; see SceneNames()).
+// velvet_bumps, velvet_mismatch; see SceneNames()).
 std::vector<std::string> SceneNames();
 // Deterministic from options.seed, independent of the thread count. Throws std::invalid_argument
 // for an unknown name or options that fail Check().

@@ -30,7 +30,7 @@ constexpr double kCentralDifferenceTolerance = 0.01;
 constexpr float kSameSampleTolerance = 1e-6f;
 
 // Presets whose maps do not depend on the seed (closed-form geometry, one constant material).
-const std::set<std::string> kSeedless = {"flat_lambertian", "sphere_cap", "bumps"};
+const std::set<std::string> kSeedless = {"flat_lambertian", "sphere_cap", "bumps", "velvet_bumps"};
 const std::set<std::string> kFabrics = {"plain", "twill", "satin", "knit", "denim", "velvet", "lace"};
 
 SceneOptions Options(std::uint64_t seed = 7, int size = kSize, double pitch_mm = kPitchMm) {
@@ -59,7 +59,7 @@ TEST(SceneNamesTest, HoldsTheIssuePresetsAndTheExtremeOnes) {
   const auto names = SceneNames();
   for (const char* required : {"plain", "twill", "satin", "knit", "denim", "velvet", "lace", "dark", "bright",
                                "mirror", "pure_velvet", "holes", "flat_lambertian", "sphere_cap", "bumps",
-                               "velvet_mismatch"}) {
+                               "velvet_bumps", "velvet_mismatch"}) {
     EXPECT_NE(std::find(names.begin(), names.end(), required), names.end()) << required;
   }
 }
