@@ -48,11 +48,15 @@ struct BandMap {
   int y0 = 0, rows = 0;  // camera rows to read
 };
 
-BandMap MakeBandMap(const CameraModel& camera, const MetricGrid& full, const MetricGrid& band, double surface_z_mm) {
+// `band_z_mm`: empty (the plane z = surface_z_mm) or the band's rows of the relief; `centre_z_mm`:
+// the height of the whole grid's centre pixel, where BuildStack measures the pre-filter strength.
+BandMap MakeBandMap(const CameraModel& camera, const MetricGrid& full, const MetricGrid& band, double surface_z_mm,
+                    const Image& band_z_mm, double centre_z_mm) {
   BandMap out;
-  out.map = BuildRectificationMap(camera, band, surface_z_mm);
+  out.map = band_z_mm.empty() ? BuildRectificationMap(camera, band, surface_z_mm)
+                              : BuildRectificationMap(camera, band, band_z_mm);
   // The pre-filter strength is the whole grid's (measured at its centre), as in BuildStack.
-  const Eigen::Vector3d centre = full.PixelCentreInWorld(full.width / 2, full.height / 2, surface_z_mm);
+  const Eigen::Vector3d centre = full.PixelCentreInWorld(full.width / 2, full.height / 2, centre_z_mm);
   const double camera_pitch = camera.PitchOnPlaneMm(centre);
   out.map.camera_px_per_grid_px = camera_pitch > 0.0 ? full.pitch_mm / camera_pitch : 1.0;
   float lo = static_cast<float>(camera.height - 1), hi = 0.0f;
@@ -110,11 +114,20 @@ void NormaliseObservationRgb(Image& rgb, double exposure_s, const Eigen::Vector3
 }
 
 Stack BuildStackRows(const Capture& capture, const CalibrationResult& calibration, const CalibrationOptions& options,
-                     const std::vector<std::size_t>& frames, int row0, int rows, const ProgressCallback& progress) {
+                     const std::vector<std::size_t>& frames, int row0, int rows, const ProgressCallback& progress,
+                     const Image& surface_z_mm) {
   const Manifest& manifest = capture.manifest();
   Stack stack;
   stack.side = options.side;
   stack.grid = GridRows(calibration.grid, row0, rows);
+  const MetricGrid& full = calibration.grid;
+  if (!surface_z_mm.empty() &&
+      (surface_z_mm.width() != full.width || surface_z_mm.height() != full.height || surface_z_mm.channels() != 1)) {
+    throw std::invalid_argument("BuildStackRows: the surface heights must be one plane of the whole grid's size");
+  }
+  const Image band_z = surface_z_mm.empty() ? Image() : CropRows(surface_z_mm, row0, rows);
+  const double centre_z =
+      surface_z_mm.empty() ? calibration.surface_z_mm : surface_z_mm.at(0, full.height / 2, full.width / 2);
   std::map<std::string, int> view_of_camera, light_of_id;
   std::map<std::string, BandMap> maps;
   const bool colour = options.apply_colour_correction && calibration.colour.applied;
@@ -131,7 +144,8 @@ Stack BuildStackRows(const Capture& capture, const CalibrationResult& calibratio
     if (!view_of_camera.count(spec.camera)) {
       view_of_camera[spec.camera] = static_cast<int>(stack.views.size());
       stack.views.push_back({spec.camera, camera->model.CentreInWorld()});
-      maps.emplace(spec.camera, MakeBandMap(camera->model, calibration.grid, stack.grid, calibration.surface_z_mm));
+      maps.emplace(spec.camera,
+                   MakeBandMap(camera->model, full, stack.grid, calibration.surface_z_mm, band_z, centre_z));
     }
     if (!light_of_id.count(*spec.light)) {
       light_of_id[*spec.light] = static_cast<int>(stack.lights.size());

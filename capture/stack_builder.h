@@ -27,11 +27,13 @@ std::vector<std::size_t> SideSampleFrames(const Manifest& manifest, const std::s
 
 // The band [row0, row0 + rows) of calibration.grid as BuildStack would give its rows, built from
 // `frames` only (manifest indices of sample frames of options.side; views and lights are numbered in
-// that order, as BuildStack numbers them). Throws InputError like BuildStack, std::out_of_range for
-// rows outside the grid.
+// that order, as BuildStack numbers them). `surface_z_mm` as BuildStack's: empty (the plane
+// calibration.surface_z_mm) or the heights of the WHOLE grid (1 plane, mm, world z), of which the
+// band takes its rows. Throws InputError like BuildStack, std::out_of_range for rows outside the
+// grid, std::invalid_argument for heights of another size.
 Stack BuildStackRows(const Capture& capture, const CalibrationResult& calibration, const CalibrationOptions& options,
                      const std::vector<std::size_t>& frames, int row0, int rows,
-                     const ProgressCallback& progress = {});
+                     const ProgressCallback& progress = {}, const Image& surface_z_mm = Image());
 
 // Frame units -> the Stack's units in place (BuildStack and BuildStackRows): divide by exposure and
 // the light's intensity per channel, then apply the colour matrix when `colour` is set.

@@ -317,13 +317,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);
-      if (tilted_view) {
-        report.steps.push_back({"relief registration " + side, false,
-                                "processed in bands: the tilted views are rectified on the plane of the sample's face "
-                                "only, not at the relief's heights (docs/process.md, Large scans)",
-                                0.0});
-        report.steps.push_back(TiltedViewNormalsStep());
-      }
+      if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());  // registered on the relief in bands
       stack = std::move(tiled.sample);
       reconstruction = std::move(tiled.reconstruction);
       fit = std::move(tiled.fit);

@@ -85,6 +85,10 @@ Stack SideViews(const PreparedCapture& prepared, const std::string& side) {
 }
 
 double MarkHiddenFromTiltedViews(const Image& surface_z_mm, Stack* stack) {
+  return MarkHiddenFromTiltedViews(surface_z_mm, stack->grid, stack);
+}
+
+double MarkHiddenFromTiltedViews(const Image& surface_z_mm, const MetricGrid& height_grid, Stack* stack) {
   const std::size_t pixels = static_cast<std::size_t>(stack->grid.width) * stack->grid.height;
   // One "light" per tilted view, at its camera's centre: what it cannot light, the camera cannot see.
   Stack probe;
@@ -105,7 +109,7 @@ double MarkHiddenFromTiltedViews(const Image& surface_z_mm, Stack* stack) {
     probe.observations.push_back(std::move(o));
   }
   if (probe.observations.empty()) return 0.0;
-  const reconstruction::CastShadowCounts hidden = reconstruction::MarkCastShadows(surface_z_mm, &probe);
+  const reconstruction::CastShadowCounts hidden = reconstruction::MarkCastShadows(surface_z_mm, height_grid, &probe);
   for (Observation& o : stack->observations) {
     const int k = probe_of_view.at(static_cast<std::size_t>(o.view));
     if (k < 0) continue;

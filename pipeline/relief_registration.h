@@ -45,6 +45,9 @@ Image ReliefHeightsMm(const Image& height_mm, const Image& valid, double surface
 // `surface_z_mm` (the absolute heights, ReliefHeightsMm). Returns the share of the tilted views'
 // grid pixels marked (0 when there is no tilted view).
 double MarkHiddenFromTiltedViews(const Image& surface_z_mm, Stack* stack);
+// The same for a stack whose grid is a band of `height_grid`, the grid `surface_z_mm` covers (scans
+// in bands: a band's pixels can be hidden by relief outside it).
+double MarkHiddenFromTiltedViews(const Image& surface_z_mm, const MetricGrid& height_grid, Stack* stack);
 
 // Normals of a capture with a tilted view: photometric stereo from the most vertical view alone
 // (options->photometric_stereo.view) and no per-pixel normal refinement in the fit

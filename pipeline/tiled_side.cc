@@ -3,10 +3,12 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "capture/stack_builder.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/relief_registration.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
@@ -27,22 +29,35 @@ class Bands {
   int count() const { return plan_.bands; }
   int Row0(int band) const { return band * plan_.band_rows; }
   int Rows(int band) const { return std::min(plan_.band_rows, prepared_.calibration.grid.height - Row0(band)); }
+  // From here on every band is built at these heights (the whole grid's, mm, world z) and its
+  // pixels hidden from a tilted view are marked (relief_registration.h).
+  void PutOnRelief(Image surface_z_mm) { relief_ = std::move(surface_z_mm); }
   Stack Build(const std::vector<std::size_t>& frames, int band) {
     const double start = StageClock();
-    Stack stack = BuildStackRows(prepared_.capture, prepared_.calibration, calibration_, frames, Row0(band), Rows(band));
+    Stack stack = BuildStackRows(prepared_.capture, prepared_.calibration, calibration_, frames, Row0(band), Rows(band),
+                                 {}, relief_);
+    if (!relief_.empty()) {
+      const double pixels = static_cast<double>(stack.grid.width) * stack.grid.height;
+      hidden_sum_ += MarkHiddenFromTiltedViews(relief_, prepared_.calibration.grid, &stack) * pixels;
+      hidden_pixels_ += pixels;
+    }
     build_seconds_ += StageClock() - start;
     ++builds_;
     return stack;
   }
   double build_seconds() const { return build_seconds_; }
   int builds() const { return builds_; }
+  // Share of the tilted views' pixels marked hidden over the bands built on the relief so far.
+  double hidden_share() const { return hidden_pixels_ > 0.0 ? hidden_sum_ / hidden_pixels_ : 0.0; }
 
  private:
   const PreparedCapture& prepared_;
   const TilePlan& plan_;
   CalibrationOptions calibration_;
+  Image relief_;
   double build_seconds_ = 0.0;
   int builds_ = 0;
+  double hidden_sum_ = 0.0, hidden_pixels_ = 0.0;
 };
 
 // Appends a band's sampled pixels to the sample Stack (allocated on the first band).
@@ -296,6 +311,49 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.reconstruction.photometric_stereo = std::move(ps);
   // The fit's sample and every band built from here on carry the final marks.
   if (!shadow_height.empty()) mark(shadow_height, &out.sample);
+  // A tilted view (relief_registration.h): the solves above used the most vertical view alone, on
+  // the face's plane. Their heights now place every grid pixel at its own height: the bands are
+  // built again there (the tilted views registered on the relief, their hidden pixels marked), and
+  // one more sweep solves photometric stereo on them and gathers the fit's sample anew, as the
+  // one-band path reconstructs again on its relief stack. The solve keeps the heights the last one
+  // used for the near lights' vectors (no new near-light rounds: the top view moves by hundredths
+  // of a pixel).
+  if (NeedsReliefRegistration(out.sample)) {
+    const double relief_start = StageClock();
+    const int builds_before = bands.builds();
+    RunReport first_pass;  // the heights of the plane's solve place the relief; the run keeps the final ones
+    IntegrateSide(grid, near, options, alpha, &out.reconstruction, &first_pass, progress);
+    Image z = ReliefHeightsMm(out.reconstruction.height_mm, out.reconstruction.valid, prepared.calibration.surface_z_mm);
+    const auto [lo, hi] = std::minmax_element(z.plane(0).begin(), z.plane(0).end());
+    const double z_lo = *lo, z_hi = *hi;
+    bands.PutOnRelief(std::move(z));
+    PhotometricStereoResult plane_ps = std::move(out.reconstruction.photometric_stereo);
+    Image solved_at = std::move(plane_ps.height_mm);  // empty for distant lights: the anchor plane
+    // The plane's maps are released before the sweep; only its counts and round figures are kept.
+    plane_ps.normal = plane_ps.albedo = plane_ps.confidence = plane_ps.condition_number = plane_ps.used_lights = Image();
+    out.reconstruction = SideReconstruction();
+    Stack sample;
+    PhotometricStereoResult relief_ps = solve_sweep(solved_at.empty() ? nullptr : &solved_at,
+                                                    shadow_height.empty() ? nullptr : &shadow_height, &sample,
+                                                    "photometric stereo (on the relief)");
+    relief_ps.height_mm = std::move(solved_at);
+    relief_ps.near_iterations = plane_ps.near_iterations;
+    relief_ps.diffuse_roughness = plane_ps.diffuse_roughness;
+    relief_ps.last_normal_change_deg = plane_ps.last_normal_change_deg;
+    out.reconstruction.photometric_stereo = std::move(relief_ps);
+    out.sample = std::move(sample);
+    if (!shadow_height.empty()) mark(shadow_height, &out.sample);  // the sweep marks a band after sampling it
+    const int top = MostVerticalView(out.sample);
+    char detail[360];
+    std::snprintf(detail, sizeof detail,
+                  "heights from view %s alone (%.1f deg from the vertical): %.3f to %.3f mm, top on the face z = %.3f "
+                  "mm; every view rectified at them, in %d bands (%d more builds); %.2f %% of the tilted views' "
+                  "pixels hidden by the relief",
+                  out.sample.views.at(static_cast<std::size_t>(top)).camera_id.c_str(), ViewTiltDeg(out.sample, top),
+                  z_lo, z_hi, prepared.calibration.surface_z_mm, bands.count(), bands.builds() - builds_before,
+                  100.0 * bands.hidden_share());
+    report->steps.push_back({"relief registration " + side, true, detail, StageClock() - relief_start});
+  }
   out.reconstruction.cast_shadow_share = shadow_height.empty() ? 0.0 : shadow_counts.share();
   IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
   const SideReconstruction& geometry = out.reconstruction;

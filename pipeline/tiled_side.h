@@ -9,6 +9,9 @@
 //   sweeps 2.. near point lights: the whole normal map is integrated once per round and every band
 //              solved again at the new heights (RunPhotometricStereo's refinement, round by round)
 //   integration of the whole normal map (as ReconstructSide)
+//   relief     a tilted view only (relief_registration.h): the bands from here on are built at the
+//              heights (top on the face) and their hidden pixels marked; one sweep solves
+//              photometric stereo on them again and gathers the fit's sample anew; integration again
 //   fit        clusters on the sample (fitting/tiled_fit.h FitClusterModel), then one sweep of the
 //              per-pixel step with the clusters fixed (FitPixelRows), then the map decisions
 //   residual   one sweep over the residual map's few observations, after the decisions

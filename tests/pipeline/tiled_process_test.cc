@@ -9,6 +9,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <stdexcept>
+#include <string>
 
 #include "capture/calibrate.h"
 #include "capture/capture.h"
@@ -47,24 +49,43 @@ class TiledTest : public ::testing::Test {
   }
 };
 
+// A relief to rectify on (mm, world z): 0.4 mm of ramp along the rows and +-0.15 mm of ripples
+// over the face's plane, so that every grid pixel has its own height.
+Image TestRelief(const CalibrationResult& calibration) {
+  const MetricGrid& grid = calibration.grid;
+  Image z(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  for (int r = 0; r < grid.height; ++r) {
+    for (int c = 0; c < grid.width; ++c) {
+      z.at(0, r, c) = static_cast<float>(calibration.surface_z_mm - 0.4 * r / grid.height + 0.15 * std::sin(0.7 * c));
+    }
+  }
+  return z;
+}
+
 // Every observation of every band, bit for bit the same rows of BuildStack's: with dark, ambient
 // and flat-field frames, at the native resolution and on a grid coarse enough for the
-// anti-aliasing pre-filter (whose reach the band's camera rows must cover).
+// anti-aliasing pre-filter (whose reach the band's camera rows must cover); on the face's plane
+// and at a relief's heights (the tilted views' registration, pipeline/relief_registration.h).
 TEST_F(TiledTest, BandStacksEqualTheRowsOfTheWholeStack) {
   const fs::path dir = MakeCapture("calibrated", /*calibration_frames=*/true, 6);
   const Capture capture = Capture::Open(dir);
-  for (const double dpi : {0.0, 100.0}) {
+  struct Case {
+    double dpi;  // 0: native
+    bool on_relief;
+  };
+  for (const Case& t : {Case{0.0, false}, Case{100.0, false}, Case{0.0, true}, Case{100.0, true}}) {
     CalibrationOptions options;
-    if (dpi > 0.0) options.dpi = dpi;
+    if (t.dpi > 0.0) options.dpi = t.dpi;
     const CalibrationResult calibration = Calibrate(capture, options);
     ASSERT_FALSE(calibration.flats.empty()) << "the capture should have flat fields";
-    const Stack whole = BuildStack(capture, calibration, options);
+    const Image relief = t.on_relief ? TestRelief(calibration) : Image();
+    const Stack whole = BuildStack(capture, calibration, options, {}, relief);
     const std::vector<std::size_t> frames = SideSampleFrames(capture.manifest(), "front");
     const int h = calibration.grid.height;
     const int edges[] = {0, h / 3, h / 3 + 1, h};  // a one-row band too
     for (int b = 0; b + 1 < 4; ++b) {
       const int row0 = edges[b], rows = edges[b + 1] - edges[b];
-      const Stack band = BuildStackRows(capture, calibration, options, frames, row0, rows);
+      const Stack band = BuildStackRows(capture, calibration, options, frames, row0, rows, {}, relief);
       ASSERT_EQ(band.observations.size(), whole.observations.size());
       EXPECT_DOUBLE_EQ(band.grid.PixelCentreInWorld(0, 0).y(), whole.grid.PixelCentreInWorld(0, row0).y());
       for (std::size_t k = 0; k < whole.observations.size(); ++k) {
@@ -81,12 +102,20 @@ TEST_F(TiledTest, BandStacksEqualTheRowsOfTheWholeStack) {
             irradiance_differ += o.irradiance.at(0, r, c) != w.irradiance.at(0, row0 + r, c);
           }
         }
-        EXPECT_EQ(rgb_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
-        EXPECT_EQ(flags_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
-        EXPECT_EQ(irradiance_differ, 0) << "dpi " << dpi << " band " << b << " observation " << k;
+        const std::string where = "dpi " + std::to_string(t.dpi) + (t.on_relief ? " on the relief" : " on the plane") +
+                                  ", band " + std::to_string(b) + ", observation " + std::to_string(k);
+        EXPECT_EQ(rgb_differ, 0) << where;
+        EXPECT_EQ(flags_differ, 0) << where;
+        EXPECT_EQ(irradiance_differ, 0) << where;
       }
     }
   }
+  // A relief of another size than the whole grid is refused.
+  CalibrationOptions options;
+  const CalibrationResult calibration = Calibrate(capture, options);
+  const Image wrong(calibration.grid.width, calibration.grid.height / 2, 1, 0.0f);
+  EXPECT_THROW(BuildStackRows(capture, calibration, options, SideSampleFrames(capture.manifest(), "front"), 0, 4, {}, wrong),
+               std::invalid_argument);
 }
 
 TEST_F(TiledTest, PlanCutsEvenBandsWithinTheBudget) {
