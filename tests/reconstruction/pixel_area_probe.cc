@@ -14,7 +14,9 @@
 //
 // Build and run:
 //   cmake --build build --target reconstruction_pixel_area_probe
-//   build/tests/reconstruction/reconstruction_pixel_area_probe SCENE [K] [OFFSET_PX] [FILTER] [SIZE]
+//   build/tests/reconstruction/reconstruction_pixel_area_probe SCENE [K] [OFFSET_PX] [FILTER] [SIZE] [SHADING]
+// SHADING (Shading below) replaces the BRDF by simpler ones, to tell the causes of the on-grid
+// floor apart (docs/reconstruction.md, "Photometric stereo at the camera's resolution").
 // FILTER: footprint (the pipeline's, capture/rectification.h), nyquist (the Gaussian it replaced,
 // sigma = 0.5 sqrt(k^2 - 1) camera px from k > 1.5 on) or none. Figures in docs/reconstruction.md.
 #include <opencv2/imgproc.hpp>
@@ -24,6 +26,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "capture/opencv_bridge.h"
@@ -43,8 +46,28 @@ namespace {
 constexpr int kFine = 6;    // fine pixels per output pixel along each axis
 constexpr int kBorder = 4;  // output pixels left out at each edge (kernel reach, clamped borders)
 
+// What a fine pixel reflects: the renderer's BRDF, or a simpler one to tell the floor's causes apart.
+enum class Shading {
+  kPrincipled,    // the scene's BRDF (EvaluateModel)
+  kNoLobes,       // the same, specular and sheen 0
+  kLambert,       // base colour / pi, attached shadows clamped
+  kGrey,          // 0.5 everywhere, clamped: the weave's geometry only
+  kLinearColour,  // base colour x cos, not clamped: only the colours' weighting of the normals
+  kLinearGrey,    // 0.5 x cos, not clamped: nothing a pixel's mean cannot hold (a check: ~0)
+};
+
+bool ParseShading(const std::string& name, Shading* out) {
+  static const std::pair<const char*, Shading> names[] = {
+      {"principled", Shading::kPrincipled}, {"no-lobes", Shading::kNoLobes},         {"lambert", Shading::kLambert},
+      {"grey", Shading::kGrey},             {"linear-colour", Shading::kLinearColour}, {"linear-grey", Shading::kLinearGrey}};
+  for (const auto& [n, s] : names) {
+    if (name == n) return *out = s, true;
+  }
+  return false;
+}
+
 // Shading of one fine pixel under light l (world, unit), view +z: f(l, v) cos(theta_l), RGB.
-Vec3<float> ShadeFine(const synthetic::SceneTruth& fine, int row, int col, const Vec3<float>& l) {
+Vec3<float> ShadeFine(const synthetic::SceneTruth& fine, int row, int col, const Vec3<float>& l, Shading shading) {
   Vec3<float> n(fine.normal.at(0, row, col), fine.normal.at(1, row, col), fine.normal.at(2, row, col));
   n.normalize();
   const Vec3<float> fibre(fine.tangent.at(0, row, col), fine.tangent.at(1, row, col), fine.tangent.at(2, row, col));
@@ -60,6 +83,15 @@ Vec3<float> ShadeFine(const synthetic::SceneTruth& fine, int row, int col, const
   p.sheen_tint = fine.sheen_tint.at(0, row, col);
   p.anisotropic = fine.anisotropic.at(0, row, col);
   const Vec3<float> ll(l.dot(t), l.dot(b), l.dot(n)), vl(v.dot(t), v.dot(b), v.dot(n));
+  const Vec3<float> grey(0.5f, 0.5f, 0.5f);
+  switch (shading) {
+    case Shading::kLambert: return std::max(0.0f, ll.z()) * p.base_color / static_cast<float>(M_PI);
+    case Shading::kGrey: return std::max(0.0f, ll.z()) * grey;
+    case Shading::kLinearColour: return ll.z() * p.base_color;
+    case Shading::kLinearGrey: return ll.z() * grey;
+    case Shading::kNoLobes: p.specular = p.sheen = 0.0f; break;
+    case Shading::kPrincipled: break;
+  }
   return std::max(0.0f, ll.z()) * synthetic::EvaluateModel(fine.model, p, ll, vl);
 }
 
@@ -68,7 +100,8 @@ Vec3<float> ShadeFine(const synthetic::SceneTruth& fine, int row, int col, const
 int main(int argc, char** argv) {
   SetLogLevel(LogLevel::kError);
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s SCENE [K=1|2|3] [OFFSET_PX=0.33] [footprint|nyquist|none] [SIZE=192]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s SCENE [K=1|2|3] [OFFSET_PX=0.33] [footprint|nyquist|none] [SIZE=192] [SHADING=principled]\n",
+                 argv[0]);
     return 2;
   }
   const std::string scene_name = argv[1];
@@ -76,6 +109,12 @@ int main(int argc, char** argv) {
   const double offset_px = argc > 3 ? std::stod(argv[3]) : 0.33;
   const std::string filter = argc > 4 ? argv[4] : "footprint";
   const int n = argc > 5 ? std::stoi(argv[5]) : 192;
+  Shading shading = Shading::kPrincipled;
+  const std::string shading_name = argc > 6 ? argv[6] : "principled";
+  if (!ParseShading(shading_name, &shading)) {
+    std::fprintf(stderr, "SHADING must be principled, no-lobes, lambert, grey, linear-colour or linear-grey\n");
+    return 2;
+  }
   if ((k != 1 && k != 2 && k != 3) || (filter != "footprint" && filter != "nyquist" && filter != "none") || n < 16) {
     std::fprintf(stderr, "K must be 1, 2 or 3; FILTER footprint, nyquist or none; SIZE >= 16\n");
     return 2;
@@ -125,7 +164,7 @@ int main(int argc, char** argv) {
             for (int i = 0; i < fine_per_camera; ++i) {
               const int fr = std::min(last, static_cast<int>(v) * fine_per_camera + j + shift);
               const int fc = std::min(last, u * fine_per_camera + i + shift);
-              sum += ShadeFine(fine, fr, fc, l);
+              sum += ShadeFine(fine, fr, fc, l, shading);
             }
           }
           sum /= static_cast<float>(fine_per_camera * fine_per_camera);
@@ -163,8 +202,8 @@ int main(int argc, char** argv) {
     for (double e : errors) mean += e;
     mean /= static_cast<double>(errors.size());
     std::sort(errors.begin(), errors.end());
-    std::printf("%s, %d camera px per map px, offset %.3f camera px, %s filter, %s: normal error mean %.2f median %.2f p95 %.2f deg\n",
-                scene_name.c_str(), k, static_cast<double>(shift) / fine_per_camera, filter.c_str(),
+    std::printf("%s (%s shading), %d camera px per map px, offset %.3f camera px, %s filter, %s: normal error mean %.2f median %.2f p95 %.2f deg\n",
+                scene_name.c_str(), shading_name.c_str(), k, static_cast<double>(shift) / fine_per_camera, filter.c_str(),
                 robust ? "robust + Burley" : "least squares + Lambert", mean, errors[errors.size() / 2],
                 errors[errors.size() * 95 / 100]);
   }
