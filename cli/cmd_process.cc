@@ -61,6 +61,11 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_option("--hold-out-lights", args->hold_out_lights,
                  "Light ids (the manifest's, comma-separated, e.g. L03,L09) left out of reconstruction and fit; "
                  "the report gives the material's re-render error against their photographs");
+  sub.add_option("--ps-supersample", args->options.ps_supersample,
+                 "Photometric stereo on a grid K times finer than the maps (a camera at K times their dpi resolves "
+                 "it), the normals averaged onto them: 1 = off, 2 or 3, 0 = as fine as the top camera resolves. "
+                 "Closer normals on woven fabric (docs/reconstruction.md); K^2 times the stack's memory, one band only")
+      ->capture_default_str();
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
                  "separately, of the RAW decode cache (docs/process.md, Large scans)")

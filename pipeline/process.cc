@@ -15,6 +15,7 @@
 #include "pipeline/held_out_lights.h"
 #include "pipeline/material_writer.h"
 #include "pipeline/relief_registration.h"
+#include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/stages.h"
 #include "pipeline/tiled_side.h"
 #include "pipeline/tiles.h"
@@ -160,6 +161,9 @@ bool ProcessOptions::Check(std::string* why) const {
   if (created && !ParseUtcTimestamp(*created)) return fail("--created must be a UTC time like 2026-11-22T10:00:00Z");
   if (!solver.empty() && solver != "ls" && solver != "robust") return fail("--solver must be ls or robust");
   if (!(max_memory_gib > 0.0 && max_memory_gib <= 1e6)) return fail("--max-memory must be a number of GiB in (0, 1e6]");
+  if (ps_supersample < 0 || ps_supersample > kMaxPsSupersample) {
+    return fail("--ps-supersample must be 0 (as fine as the camera resolves), 1, 2 or 3");
+  }
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
   if (!fit_mode.empty() && fit_mode != "clusters" && fit_mode != "per-pixel") return fail("--fit-mode must be clusters or per-pixel");
   for (std::size_t i = 0; i < hold_out_lights.size(); ++i) {
@@ -218,6 +222,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"solver", reconstruction::PsSolverName(stages.photometric_stereo.solver)},
                     {"integrator", reconstruction::IntegratorName(stages.integration.method)},
                     {"max_memory_gib", options.max_memory_gib},
+                    {"ps_supersample", options.ps_supersample},
                     {"hold_out_lights", options.hold_out_lights}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 
@@ -305,15 +310,31 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         stack = BuildSideStackOnRelief(prepared, side, stages, alpha, std::move(stack), &report, progress);
         if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
       }
-      reconstruction = ReconstructSide(&stack, side_stages, alpha, &report, progress);
-      fit = FitSide(stack, reconstruction, side_stages, &report, progress);
+      std::string lowered;
+      const int k = ChoosePsSupersample(options.ps_supersample, prepared.calibration,
+                                        static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB,
+                                        &lowered);
+      if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid " + side, false, lowered, 0.0});
+      report.options["ps_supersample_" + side] = k;
+      FineReconstruction fine;
+      reconstruction = ReconstructSideSupersampled(prepared, side, k, &stack, side_stages, alpha, &report, progress, &fine);
+      Image fine_height;
+      fit = FitSideWithFineNormals(stack, reconstruction, std::move(fine), side_stages, &report, progress, &fine_height);
       const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
                                     [](const LightModel& l) { return l.type == LightType::kPoint; });
-      fitted_normals = AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress);
+      fitted_normals = fine_height.empty()
+                           ? AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress)
+                           : AdoptFineFittedNormals(&fit, std::move(fine_height), &reconstruction, &report);
       if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
       if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
+      if (options.ps_supersample != 1) {
+        report.steps.push_back({"photometric stereo on a finer grid " + side, false,
+                                "processed in bands: photometric stereo runs on the maps' grid (docs/process.md, Large scans)",
+                                0.0});
+      }
+      report.options["ps_supersample_" + side] = 1;
       TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);

@@ -39,6 +39,10 @@ struct ProcessOptions {
   // Memory budget of one band's stack, GiB: a side whose whole stack (model in pipeline/tiles.h)
   // needs more is processed in bands of rows (docs/process.md, "Large scans: memory and time").
   double max_memory_gib = 4.0;          // = kDefaultStackBudgetGiB
+  // Photometric stereo on a grid this many times finer than the maps', the normals averaged onto
+  // them (pipeline/supersampled_reconstruction.h): 1 = on the maps' grid, 2 or 3, 0 = as fine as
+  // the top camera resolves (up to 3). Lowered when the fine stack does not fit one band.
+  int ps_supersample = 1;
   // Returns false and says why when an option is out of range.
   bool Check(std::string* why) const;
 };

@@ -1,0 +1,374 @@
+#include "pipeline/supersampled_reconstruction.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <vector>
+#include <set>
+#include <utility>
+
+#include "capture/stack_builder.h"
+#include "core/parallel.h"
+#include "fitting/tiled_fit.h"
+#include "pipeline/tiles.h"
+#include "reconstruction/cast_shadows.h"
+#include "reconstruction/normal_integration.h"
+
+namespace u3mscan {
+namespace {
+
+// A camera at 2.98 px per map px (its dpi rounded) supports 3: the floor is taken this much above.
+constexpr double kFactorSlack = 0.05;
+// Where the height's long wavelengths (from the maps' grid) meet its detail (from the fine grid):
+// sigma of the Gaussian that splits them, map pixels (measured: 4 and 8 give the same heights to
+// within 0.1 % of the range on plain, velvet and satin at 2x and 3x).
+constexpr double kHeightSplitSigmaPx = 4.0;
+
+// `coarse` (on `grid`) at the centres of RefineGrid(grid, k): bilinear, edges clamped.
+Image Upsample(const Image& coarse, int k) {
+  const int w = coarse.width(), h = coarse.height();
+  Image fine(w * k, h * k, coarse.channels(), 0.0f, coarse.pitch_mm() / k);
+  ParallelFor(static_cast<std::size_t>(h * k), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t fr = begin; fr < end; ++fr) {
+      const double y = std::clamp((static_cast<double>(fr) + 0.5) / k - 0.5, 0.0, h - 1.0);
+      const int r0 = std::min(static_cast<int>(y), h - 1), r1 = std::min(r0 + 1, h - 1);
+      const double fy = y - r0;
+      for (int fc = 0; fc < w * k; ++fc) {
+        const double x = std::clamp((fc + 0.5) / k - 0.5, 0.0, w - 1.0);
+        const int c0 = std::min(static_cast<int>(x), w - 1), c1 = std::min(c0 + 1, w - 1);
+        const double fx = x - c0;
+        for (int ch = 0; ch < coarse.channels(); ++ch) {
+          const double top = (1 - fx) * coarse.at(ch, r0, c0) + fx * coarse.at(ch, r0, c1);
+          const double bottom = (1 - fx) * coarse.at(ch, r1, c0) + fx * coarse.at(ch, r1, c1);
+          fine.at(ch, static_cast<int>(fr), fc) = static_cast<float>((1 - fy) * top + fy * bottom);
+        }
+      }
+    }
+  });
+  return fine;
+}
+
+Image UpsampleNearest(const Image& coarse, int k) {
+  Image fine(coarse.width() * k, coarse.height() * k, coarse.channels(), 0.0f, coarse.pitch_mm() / k);
+  for (int ch = 0; ch < coarse.channels(); ++ch) {
+    for (int r = 0; r < fine.height(); ++r) {
+      for (int c = 0; c < fine.width(); ++c) fine.at(ch, r, c) = coarse.at(ch, r / k, c / k);
+    }
+  }
+  return fine;
+}
+
+enum class Pool { kMean, kMax };
+
+// Each k x k block of `fine` to one pixel of the maps' grid (pitch `pitch_mm`).
+Image Downsample(const Image& fine, int k, Pool pool, double pitch_mm) {
+  const int w = fine.width() / k, h = fine.height() / k;
+  Image out(w, h, fine.channels(), 0.0f, pitch_mm);
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t row = begin; row < end; ++row) {
+      for (int col = 0; col < w; ++col) {
+        for (int ch = 0; ch < fine.channels(); ++ch) {
+          double sum = 0.0, largest = -1e300;
+          for (int j = 0; j < k; ++j) {
+            for (int i = 0; i < k; ++i) {
+              const double v = fine.at(ch, static_cast<int>(row) * k + j, col * k + i);
+              sum += v;
+              largest = std::max(largest, v);
+            }
+          }
+          out.at(ch, static_cast<int>(row), col) = static_cast<float>(pool == Pool::kMean ? sum / (k * k) : largest);
+        }
+      }
+    }
+  });
+  return out;
+}
+
+// The normalised sum of each block's unit normals; a block whose normals cancel keeps +z.
+Image DownsampleNormals(const Image& fine, int k, double pitch_mm) {
+  Image out = Downsample(fine, k, Pool::kMean, pitch_mm);
+  const std::size_t n = out.pixel_count();
+  float* x = out.plane(0).data();
+  float* y = out.plane(1).data();
+  float* z = out.plane(2).data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f v(x[i], y[i], z[i]);
+    const float length = v.norm();
+    const Eigen::Vector3f u = length > 1e-6f && std::isfinite(length) ? Eigen::Vector3f(v / length) : Eigen::Vector3f::UnitZ();
+    x[i] = u.x(), y[i] = u.y(), z[i] = u.z();
+  }
+  return out;
+}
+
+// Separable Gaussian blur of a 1-plane image, sigma in pixels, borders mirrored.
+Image GaussianBlur(const Image& in, double sigma_px) {
+  const int w = in.width(), h = in.height();
+  const int reach = std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px)));
+  std::vector<double> kernel(2 * reach + 1);
+  double total = 0.0;
+  for (int i = -reach; i <= reach; ++i) total += kernel[i + reach] = std::exp(-0.5 * i * i / (sigma_px * sigma_px));
+  for (double& v : kernel) v /= total;
+  auto mirror = [](int i, int n) {
+    while (i < 0 || i >= n) i = i < 0 ? -i - 1 : 2 * n - i - 1;
+    return i;
+  };
+  Image rows(w, h, 1, 0.0f, in.pitch_mm()), out(w, h, 1, 0.0f, in.pitch_mm());
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t r = begin; r < end; ++r) {
+      for (int c = 0; c < w; ++c) {
+        double sum = 0.0;
+        for (int i = -reach; i <= reach; ++i) sum += kernel[i + reach] * in.at(0, static_cast<int>(r), mirror(c + i, w));
+        rows.at(0, static_cast<int>(r), c) = static_cast<float>(sum);
+      }
+    }
+  });
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t r = begin; r < end; ++r) {
+      for (int c = 0; c < w; ++c) {
+        double sum = 0.0;
+        for (int i = -reach; i <= reach; ++i) sum += kernel[i + reach] * rows.at(0, mirror(static_cast<int>(r) + i, h), c);
+        out.at(0, static_cast<int>(r), c) = static_cast<float>(sum);
+      }
+    }
+  });
+  return out;
+}
+
+// The fine calibration: the same cameras, lights and corrections on RefineGrid(grid, k).
+CalibrationResult FineCalibration(const CalibrationResult& calibration, int k) {
+  CalibrationResult fine = calibration;
+  fine.grid = RefineGrid(calibration.grid, k);
+  for (FlatCalibration& flat : fine.flats) flat.irradiance = Upsample(flat.irradiance, k);
+  return fine;
+}
+
+// The side's sample frames (manifest indices) of the (camera, light) pairs `stack` holds, and of
+// those only view `only_view`'s camera when it is >= 0.
+std::vector<std::size_t> FramesOf(const Manifest& manifest, const std::string& side, const Stack& stack, int only_view) {
+  std::set<std::pair<std::string, std::string>> kept;
+  for (const Observation& o : stack.observations) {
+    kept.insert({stack.views.at(static_cast<std::size_t>(o.view)).camera_id, stack.lights.at(static_cast<std::size_t>(o.light)).id});
+  }
+  std::vector<std::size_t> frames;
+  for (std::size_t index : SideSampleFrames(manifest, side)) {
+    const FrameSpec& spec = manifest.frames[index];
+    if (!spec.light || !kept.count({spec.camera, *spec.light})) continue;
+    if (only_view >= 0 && spec.camera != stack.views.at(static_cast<std::size_t>(only_view)).camera_id) continue;
+    frames.push_back(index);
+  }
+  return frames;
+}
+
+long long InMapPixels(long long fine_count, int k) { return (fine_count + k * k / 2) / (k * k); }
+
+}  // namespace
+
+int PsSupersampleForCameras(const CalibrationResult& calibration) {
+  const MetricGrid& grid = calibration.grid;
+  const Eigen::Vector3d centre = grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, calibration.surface_z_mm);
+  const CameraCalibration* top = nullptr;
+  double best_tilt = 1e300;
+  for (const CameraCalibration& camera : calibration.cameras) {
+    const Eigen::Vector3d axis = (camera.model.CentreInWorld() - centre).normalized();
+    const double tilt = std::acos(std::clamp(axis.z(), -1.0, 1.0));
+    if (tilt < best_tilt) best_tilt = tilt, top = &camera;
+  }
+  if (!top) return 1;
+  const double pitch = top->model.PitchOnPlaneMm(centre);
+  if (!(pitch > 0.0)) return 1;
+  return std::clamp(static_cast<int>(std::floor(grid.pitch_mm / pitch + kFactorSlack)), 1, kMaxPsSupersample);
+}
+
+int ChoosePsSupersample(int requested, const CalibrationResult& calibration, int observations, bool flats,
+                        double budget_bytes, std::string* why) {
+  if (why) why->clear();
+  int k = requested == 0 ? PsSupersampleForCameras(calibration) : std::clamp(requested, 1, kMaxPsSupersample);
+  const int wanted = k;
+  while (k > 1 && PlanTiles(RefineGrid(calibration.grid, k), observations, flats, budget_bytes).bands > 1) --k;
+  if (why && k < wanted) {
+    *why = std::to_string(wanted) + "x finer would not fit the memory budget in one band (--max-memory): " +
+           (k > 1 ? std::to_string(k) + "x" : "on the maps' grid");
+  }
+  return k;
+}
+
+MetricGrid RefineGrid(const MetricGrid& grid, int k) {
+  MetricGrid fine = grid;
+  fine.width = grid.width * k;
+  fine.height = grid.height * k;
+  fine.pitch_mm = grid.pitch_mm / k;
+  return fine;
+}
+
+SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, const std::string& side, int k,
+                                               Stack* stack, const StageOptions& options, const Image& alpha,
+                                               RunReport* report, const ProgressCallback& progress,
+                                               FineReconstruction* keep_fine) {
+  if (keep_fine) *keep_fine = FineReconstruction();
+  if (k <= 1) return ReconstructSide(stack, options, alpha, report, progress);
+  const MetricGrid& grid = stack->grid;
+  double start = StageClock();
+  const CalibrationResult fine_calibration = FineCalibration(prepared.calibration, k);
+  CalibrationOptions calibration_options = options.calibration;
+  calibration_options.side = side;
+  const std::vector<std::size_t> frames =
+      FramesOf(prepared.capture.manifest(), side, *stack, options.photometric_stereo.view);
+  Stack fine = BuildStackRows(prepared.capture, fine_calibration, calibration_options, frames, 0,
+                              fine_calibration.grid.height, progress);
+  // The fine stack's views are numbered by its own frames: a restriction to one view follows its camera.
+  StageOptions fine_options = options;
+  if (options.photometric_stereo.view >= 0) {
+    const std::string& camera = stack->views.at(static_cast<std::size_t>(options.photometric_stereo.view)).camera_id;
+    fine_options.photometric_stereo.view = -1;
+    for (std::size_t v = 0; v < fine.views.size(); ++v) {
+      if (fine.views[v].camera_id == camera) fine_options.photometric_stereo.view = static_cast<int>(v);
+    }
+  }
+  report->steps.push_back({"rectify " + side + " at " + std::to_string(k) + "x", true,
+                           std::to_string(fine.observations.size()) + " observations on a " +
+                               std::to_string(fine.grid.width) + "x" + std::to_string(fine.grid.height) +
+                               " grid, for photometric stereo",
+                           StageClock() - start});
+
+  // The fine reconstruction's own steps describe a grid the run does not write; one step says what ran.
+  RunReport fine_report;
+  SideReconstruction fine_side =
+      ReconstructSide(&fine, fine_options, alpha.empty() ? Image() : UpsampleNearest(alpha, k), &fine_report, progress);
+  const bool every_observation = fine.observations.size() == stack->observations.size();
+  const reconstruction::PhotometricStereoResult& f = fine_side.photometric_stereo;
+  start = StageClock();
+  SideReconstruction out;
+  reconstruction::PhotometricStereoResult& ps = out.photometric_stereo;
+  ps.normal = DownsampleNormals(f.normal, k, grid.pitch_mm);
+  ps.albedo = Downsample(f.albedo, k, Pool::kMean, grid.pitch_mm);
+  ps.confidence = Downsample(f.confidence, k, Pool::kMean, grid.pitch_mm);
+  ps.condition_number = Downsample(f.condition_number, k, Pool::kMax, grid.pitch_mm);
+  ps.used_lights = Downsample(f.used_lights, k, Pool::kMean, grid.pitch_mm);
+  if (!f.height_mm.empty()) ps.height_mm = Downsample(f.height_mm, k, Pool::kMean, grid.pitch_mm);
+  ps.ill_conditioned_pixels = InMapPixels(f.ill_conditioned_pixels, k);
+  ps.dark_pixels = InMapPixels(f.dark_pixels, k);
+  ps.low_albedo_pixels = InMapPixels(f.low_albedo_pixels, k);
+  ps.clamped_normal_pixels = InMapPixels(f.clamped_normal_pixels, k);
+  ps.regularised_pixels = InMapPixels(f.regularised_pixels, k);
+  ps.near_iterations = f.near_iterations;
+  ps.diffuse_roughness = f.diffuse_roughness;
+  ps.last_normal_change_deg = f.last_normal_change_deg;
+  double solve_seconds = 0.0;
+  for (const StepRecord& s : fine_report.steps) {
+    if (s.name.rfind("photometric stereo", 0) == 0 || s.name == "cast shadows") solve_seconds += s.seconds;
+  }
+  const bool near = std::any_of(stack->lights.begin(), stack->lights.end(),
+                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  char detail[240];
+  std::snprintf(detail, sizeof detail,
+                "on the %dx%d grid (%d x %d solves per map pixel), %s; the unit normals averaged onto the maps' grid",
+                fine_side.photometric_stereo.normal.width(), fine_side.photometric_stereo.normal.height(), k, k,
+                near ? ("near point lights, height refined " + std::to_string(f.near_iterations) + " rounds").c_str()
+                     : "distant lights");
+  report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(options.photometric_stereo.solver) + ", " +
+                               std::to_string(k) + "x finer grid)",
+                           true, detail, solve_seconds + (StageClock() - start)});
+  if (!near) {
+    report->steps.push_back({"near-light refinement", false,
+                             "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
+  }
+  IntegrateSide(grid, near, options, alpha, &out, report, progress);
+  // The fit's stack leaves out what the heights shadow, as ReconstructSide's does.
+  start = StageClock();
+  if (options.mark_cast_shadows) {
+    out.cast_shadow_share = reconstruction::MarkCastShadows(out.height_mm, stack, options.cast_shadows).share();
+  }
+  report->steps.push_back(CastShadowStep(options, out.cast_shadow_share, near, StageClock() - start));
+  if (keep_fine && every_observation) {
+    keep_fine->k = k;
+    keep_fine->stack = std::move(fine);
+    keep_fine->side = std::move(fine_side);
+  }
+  return out;
+}
+
+fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
+                                          const StageOptions& options, RunReport* report,
+                                          const ProgressCallback& progress, Image* fine_height_mm) {
+  if (fine_height_mm) *fine_height_mm = Image();
+  if (fine.k <= 1 || !options.fit.refine_pixel_normals) return FitSide(stack, geometry, options, report, progress);
+  if (stack.views.size() < 2) {
+    report->steps.push_back({"oblique view", false,
+                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
+  }
+  const double start = StageClock();
+  const int k = fine.k;
+  const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                         geometry.height_mm};
+  // FitPrincipled's stages (tiled_fit.h), then the per-pixel step once more on the fine grid.
+  const fitting::ClusterModel model = fitting::FitClusterModel(stack, surface, options.fit, progress);
+  fitting::FitResult fit = fitting::StartPixelMaps(model, stack.grid);
+  fitting::PixelTally tally;
+  fitting::FitPixelRows(model, stack, surface, 0, &fit, &tally, progress);
+  fitting::FinishPixelMaps(model, tally, &fit);
+  const double fine_start = StageClock();
+  {
+    const fitting::SurfaceGeometry fine_surface{fine.side.photometric_stereo.normal, fine.side.photometric_stereo.albedo,
+                                                fine.side.height_mm};
+    fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
+    fitting::PixelTally fine_tally;
+    fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
+    if (!fine_fit.normals.empty()) {
+      Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
+      fit.normals = DownsampleNormals(fine_fit.normals, k, stack.grid.pitch_mm);
+      if (fine_height_mm) {
+        // As AdoptFittedNormals integrates (its integrator, also for near lights), on the fine grid.
+        const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
+                                      [](const LightModel& l) { return l.type == LightType::kPoint; });
+        reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
+        integration.pitch_mm = fine.stack.grid.pitch_mm;
+        fine_fit.normals.set_pitch_mm(fine.stack.grid.pitch_mm);
+        const Image fine_height =
+            reconstruction::IntegrateNormals(fine_fit.normals, fine.side.valid, integration, progress).height_mm;
+        Image detail = Downsample(fine_height, k, Pool::kMean, stack.grid.pitch_mm);
+        if (!fit_normals_on_grid.empty()) {
+          // The fine heights' long wavelengths drift with a lean of the fine normals too small to
+          // see in their angles (plain, camera at 2x: 9 um against 4 um from the maps' grid); the
+          // maps' grid integration of the normals refined there gives those, the fine heights the rest.
+          integration.pitch_mm = stack.grid.pitch_mm;
+          const Image coarse =
+              reconstruction::IntegrateNormals(fit_normals_on_grid, geometry.valid, integration, progress).height_mm;
+          const Image low = GaussianBlur(coarse, kHeightSplitSigmaPx), detail_low = GaussianBlur(detail, kHeightSplitSigmaPx);
+          for (std::size_t i = 0; i < detail.pixel_count(); ++i) {
+            detail.data()[i] = low.data()[i] + detail.data()[i] - detail_low.data()[i];
+          }
+        }
+        *fine_height_mm = std::move(detail);
+      }
+    }
+  }
+  const double fine_seconds = StageClock() - fine_start;
+  fine = FineReconstruction();
+  fit.times.total_s = StageClock() - start;
+  std::string detail = std::to_string(fit.clusters.size()) + " clusters; normals refined on the " +
+                       std::to_string(k) + "x finer grid";
+  char seconds[64];
+  std::snprintf(seconds, sizeof seconds, " (%.2f s of it)", fine_seconds);
+  detail += seconds;
+  if (!fit.convergence.all_converged) {
+    detail += ", " + std::to_string(fit.convergence.clusters_failed) + " did not converge";
+    for (const auto& message : fit.convergence.messages) report->warnings.push_back("fit: " + message);
+  }
+  report->steps.push_back({"fit", true, detail, StageClock() - start});
+  return fit;
+}
+
+bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report) {
+  if (fit->normals.empty() || fine_height_mm.empty()) return false;
+  side->photometric_stereo.normal = std::move(fit->normals);
+  fit->normals = Image();
+  side->height_mm = std::move(fine_height_mm);
+  report->steps.push_back({"integration of the fitted normals (on the finer grid)", true,
+                           "normals refined with the fitted model on the finer grid; height integrated there, each map "
+                           "pixel the mean of its fine heights (time in the fit's step)",
+                           0.0});
+  return true;
+}
+
+}  // namespace u3mscan

@@ -1,0 +1,93 @@
+#pragma once
+// Photometric stereo on a grid k times finer than the maps' (what a camera at k times the maps'
+// dpi resolves), its normals averaged onto the maps' grid (`--ps-supersample K`).
+//
+// Why: a map pixel of a woven fabric holds yarn flanks of several colours and slopes. Solved on the
+// maps' grid, photometric stereo sees their shading summed and returns the albedo-weighted normal
+// (a darker yarn or gap weighs less) bent by the lobes of facets it cannot tell apart. On the
+// finer grid each solve covers fewer facets, and the plain mean of the fine unit normals over a
+// map pixel is close to its area-average normal: the normal that integrates to its height, and the
+// truth the synthetic scanner writes. Measured with the pixel-area probe on plain at 300 dpi, on
+// the grid: least squares on a Lambertian grey weave 0.06 deg, with the weave's colours 1.37 deg,
+// with its lobes 1.65 deg (docs/reconstruction.md, "Photometric stereo at the camera's resolution").
+//
+// The fit still runs on the maps' grid (its stack, `stack` below), with these normals.
+
+#include <string>
+
+#include "capture/calibrate.h"
+#include "core/image.h"
+#include "core/stack.h"
+#include "fitting/principled_fit.h"
+#include "pipeline/run_report.h"
+#include "pipeline/stages.h"
+
+namespace u3mscan {
+
+// Largest supersampling factor: 3 x 3 fine solves per map pixel (a 36-megapixel camera's scan at a
+// third of its resolution needs its whole resolution: 9 times the maps' stack).
+inline constexpr int kMaxPsSupersample = 3;
+
+// The factor a capture's cameras support: the floor of the most vertical camera's pixels per map
+// pixel (at the grid's centre, on the face's plane), within [1, kMaxPsSupersample]. A camera at
+// 2.98 px per map px (rounding of its dpi) counts as 3.
+int PsSupersampleForCameras(const CalibrationResult& calibration);
+
+// The factor a run uses: `requested` (0: PsSupersampleForCameras; else 1..kMaxPsSupersample),
+// lowered until the fine stack of `observations` frames fits `budget_bytes` in one band
+// (PlanTiles; a scan that needs bands on the maps' grid gets 1). `why` (when not null) says what
+// lowered it, or is cleared.
+int ChoosePsSupersample(int requested, const CalibrationResult& calibration, int observations, bool flats,
+                        double budget_bytes, std::string* why);
+
+// The grid over the same region with k x k pixels for each of `grid`'s (pitch / k; fine pixel
+// (k col + i, k row + j) is the (i, j) part of pixel (col, row)).
+MetricGrid RefineGrid(const MetricGrid& grid, int k);
+
+// ReconstructSide with photometric stereo on RefineGrid(calibration grid, k). `stack` is the side's
+// stack on the maps' grid as the fit will use it: only the frames it holds (by camera and light:
+// held-out lights and frames the side's checks left out stay out) are read again onto the fine
+// grid. The fine stack's flats are the maps' irradiance, interpolated; `alpha` (maps' grid) is
+// taken to the fine one by nearest pixel. With options.photometric_stereo.view set (a tilted view:
+// relief_registration.h) only that view's frames are read, on the face's plane (the top view
+// moves by hundredths of a pixel on the relief). On the maps' grid: normals = normalised mean of the k x k
+// fine unit normals, albedo and confidence their means, condition number their largest; near lights'
+// heights the mean of the fine heights. The height is then integrated on the maps' grid as
+// ReconstructSide does, and `stack`'s cast shadows are marked from it (when
+// options.mark_cast_shadows). Reports the photometric stereo step (named with the factor), the
+// cast shadows and the integration. k = 1 is ReconstructSide. Throws like BuildStack.
+// What the fit needs of the fine grid to refine the normals there (FitSideWithFineNormals).
+struct FineReconstruction {
+  int k = 1;                // 1: nothing below is set
+  Stack stack;              // the fine stack: the same observations in the same order as the maps'
+  SideReconstruction side;  // photometric stereo and heights on the fine grid
+};
+
+// `keep_fine` (not null, k > 1, and the fine stack holds every observation of `stack`, i.e. no
+// restriction to one view): the fine stack and reconstruction are moved there for the fit.
+SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, const std::string& side, int k,
+                                               Stack* stack, const StageOptions& options, const Image& alpha,
+                                               RunReport* report, const ProgressCallback& progress = {},
+                                               FineReconstruction* keep_fine = nullptr);
+
+// FitSide, and with `fine` (k > 1) and options.fit.refine_pixel_normals the fitted normals are
+// refined on the fine grid instead: each fine pixel with its nearest cluster's parameters
+// (fitting/tiled_fit.h FitPixelRows on the fine stack), their unit normals averaged onto the
+// maps' grid. Refined on the maps' grid they would lean back to the albedo-weighted normal of the
+// whole pixel (plain at 3x: 1.34 deg from photometric stereo at 3x, 1.94 after a refinement on the
+// maps' grid). The refined fine normals are also integrated on the fine grid, and `fine_height_mm`
+// (not null) gets, per map pixel, the mean of its fine heights (the truth's own definition of a
+// pixel's height, which integrating normals on the maps' grid misses at the yarn steps) for the
+// detail, and the maps' grid integration of the normals refined there for the wavelengths longer
+// than a few map pixels (the fine heights drift there). Left empty when the normals were not
+// refined on the fine grid. `fine` is released before returning.
+fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
+                                          const StageOptions& options, RunReport* report,
+                                          const ProgressCallback& progress = {}, Image* fine_height_mm = nullptr);
+
+// AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
+// the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the
+// step. Returns false (nothing done) when the fit has no normals or the height is empty.
+bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report);
+
+}  // namespace u3mscan
