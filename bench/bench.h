@@ -41,6 +41,9 @@ struct BenchCase {
   // a camera at 600 dpi (size_px * 2 pixels, the same sample) processed with --dpi 300: group
   // "camera-finer".
   int camera_per_map = 1;
+  // u3mscan process --ps-supersample: 1 = photometric stereo on the maps' grid, 0 = as fine as
+  // the camera resolves (pipeline/supersampled_reconstruction.h); group "camera-finer".
+  int ps_supersample = 1;
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };

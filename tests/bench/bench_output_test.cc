@@ -47,7 +47,7 @@ std::vector<BenchRow> FakeRows() {
   for (const char* preset : {"fast", "balanced", "best"}) {
     for (const char* rig : {"distant", "near"}) {
       BenchRow r;
-      r.c = {"plain", rig, 48, 0, true, preset, "", "", "matrix", ""};
+      r.c = {"plain", rig, 48, 0, true, preset, "", "", "matrix", "", ""};
       r.lights_used = 16;
       r.megapixels = 0.0023;
       r.solver_used = "robust";
@@ -66,7 +66,7 @@ std::vector<BenchRow> FakeRows() {
     }
   }
   BenchRow failed;
-  failed.c = {"velvet", "near", 48, 0, false, "fast", "ls", "", "methods", ""};
+  failed.c = {"velvet", "near", 48, 0, false, "fast", "ls", "", "methods", "", ""};
   failed.status = "failed";
   failed.error = "exit 2: error, with \"quotes\"";
   rows.push_back(failed);
@@ -156,12 +156,14 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   const auto cases = BenchMatrix(options);
   std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
-  int held_out = 0, camera_finer = 0;
+  int held_out = 0, camera_finer = 0, camera_grid_ps = 0;
   for (const auto& c : cases) {
     held_out += !c.hold_out_lights.empty() && c.group == "held-out";
     camera_finer += c.group == "camera-finer" && c.camera_per_map == 2;
+    camera_grid_ps += c.group == "camera-finer" && c.ps_supersample == 0;
     if (c.group != "camera-finer") {
       EXPECT_EQ(c.camera_per_map, 1) << c.RunId();
+      EXPECT_EQ(c.ps_supersample, 1) << c.RunId();
     }
     presets.insert(c.preset);
     rigs.insert(c.rig);
@@ -178,7 +180,8 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   EXPECT_EQ(fit_modes, std::set<std::string>{"clusters"}) << "clusters against the balanced run's per-pixel fit";
   EXPECT_TRUE(without_calibration);
   EXPECT_EQ(held_out, 1) << "one run with lights held out of the fit";
-  EXPECT_EQ(camera_finer, 1) << "one run with a camera at twice the maps' dpi";
+  EXPECT_EQ(camera_finer, 2) << "a camera at twice the maps' dpi, photometric stereo on the maps' grid and on the camera's";
+  EXPECT_EQ(camera_grid_ps, 1) << "one run with --ps-supersample 0";
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());
 }
