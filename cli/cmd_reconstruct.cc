@@ -7,6 +7,8 @@
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
 #include "pipeline/stages.h"
+#include "pipeline/supersampled_reconstruction.h"
+#include "pipeline/tiles.h"
 
 namespace u3mscan::cli {
 namespace {
@@ -16,6 +18,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
   struct Args {
     std::string capture, out, side = "front", solver = "robust", integrator = "dct";
     double dpi = 0.0;
+    int ps_supersample = 1;
     bool no_cast_shadows = false;
   };
   auto args = std::make_shared<Args>();
@@ -29,6 +32,12 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
       ->check(CLI::IsMember({"dct", "robust"}));
   sub.add_option("--side", args->side, "front | back")->capture_default_str()->check(CLI::IsMember({"front", "back"}));
   sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
+  sub.add_option("--ps-supersample", args->ps_supersample,
+                 "Photometric stereo on a grid K times finer than the maps, the unit normals averaged onto them: 1 = "
+                 "off, 2 or 3, 0 = as fine as the top camera resolves (docs/reconstruction.md; without the fit's "
+                 "refinement that `process` adds, the height from the averaged normals)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, kMaxPsSupersample));
   sub.add_flag("--no-cast-shadows", args->no_cast_shadows,
                "Do not mark cast shadows from the heights (they stay dark or outlier data for the solver)");
   sub.footer(
@@ -45,7 +54,15 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
     Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
-    const SideReconstruction result = ReconstructSide(&stack, stages, Image(), &report, bar.Callback());
+    bool flats = false;
+    for (const Observation& o : stack.observations) flats = flats || !o.irradiance.empty();
+    std::string lowered;
+    const int k = ChoosePsSupersample(args->ps_supersample, prepared.calibration,
+                                      static_cast<int>(stack.observations.size()), flats, kDefaultStackBudgetGiB * 1024.0 * 1024.0 * 1024.0,
+                                      &lowered);
+    if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid", false, lowered, 0.0});
+    const SideReconstruction result =
+        ReconstructSideSupersampled(prepared, args->side, k, &stack, stages, Image(), &report, bar.Callback());
     bar.Finish();
     const auto& ps = result.photometric_stereo;
     WriteStageOutputs(args->out,

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +19,7 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "tests/support/bump_scene.h"
+#include "u3m/image_io.h"
 #include "u3m/validate.h"
 
 extern char** environ;
@@ -217,6 +219,61 @@ TEST_F(ProcessCli, GnuParallelRecipeFromTheDocs) {
   ASSERT_EQ(RunShell("bash -c \"" + command + "\""), 0);
   EXPECT_TRUE(ValidateMaterialFile(out / "a" / "a.u3m").valid());
   EXPECT_TRUE(ValidateMaterialFile(out / "b" / "b.u3m").valid());
+}
+
+// --ps-supersample: out of range is bad usage (exit 2, nothing written); 0 on a camera at the
+// maps' dpi chooses 1 (no finer grid to solve on); `reconstruct` takes it too, and with maps at half
+// the camera's dpi solves on the camera's grid and writes maps on the maps' grid.
+TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
+  auto process = [&](const std::string& k, const std::string& out) {
+    std::string c = Exe();
+    c += " process --quiet --preset fast --ps-supersample ";
+    c += k;
+    c += " ";
+    c += Quote(root_ / "captures" / "a");
+    c += " -o ";
+    c += Quote(root_ / out);
+    return c;
+  };
+  EXPECT_EQ(RunShell(process("4", "pss_bad")), 2);
+  EXPECT_FALSE(fs::exists(root_ / "pss_bad"));
+  ASSERT_EQ(RunShell(process("0", "pss_auto")), 0);
+  std::ifstream in(root_ / "pss_auto" / "report.json");
+  const nlohmann::json report = nlohmann::json::parse(in);
+  EXPECT_EQ(report["options"]["ps_supersample"], 0);
+  EXPECT_EQ(report["options"]["ps_supersample_front"], 1);
+
+  auto reconstruct = [&](const std::string& extra, const std::string& out) {
+    std::string c = Exe();
+    c += " reconstruct ";
+    c += Quote(root_ / "captures" / "a");
+    c += " -o ";
+    c += Quote(root_ / out);
+    c += " --dpi 150 --solver ls ";
+    c += extra;
+    return c;
+  };
+  ASSERT_EQ(RunShell(reconstruct("", "rec_maps_grid")), 0);
+  ASSERT_EQ(RunShell(reconstruct("--ps-supersample 2", "rec_camera_grid")), 0);
+  EXPECT_EQ(RunShell(reconstruct("--ps-supersample 5", "rec_bad")), 2);
+  const Image on_maps = ReadImageFile(root_ / "rec_maps_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  const Image on_camera = ReadImageFile(root_ / "rec_camera_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  ASSERT_EQ(on_camera.width(), on_maps.width());
+  ASSERT_EQ(on_camera.height(), on_maps.height());
+  int not_unit = 0, differ = 0;
+  for (int r = 0; r < on_camera.height(); ++r) {
+    for (int c = 0; c < on_camera.width(); ++c) {
+      double length2 = 0.0, diff = 0.0;
+      for (int ch = 0; ch < 3; ++ch) {
+        length2 += on_camera.at(ch, r, c) * on_camera.at(ch, r, c);
+        diff += std::abs(on_camera.at(ch, r, c) - on_maps.at(ch, r, c));
+      }
+      not_unit += std::abs(std::sqrt(length2) - 1.0) > 1e-4;
+      differ += diff > 1e-4;
+    }
+  }
+  EXPECT_EQ(not_unit, 0);
+  EXPECT_GT(differ, 0) << "the camera's grid gave the maps' grid normals";
 }
 
 }  // namespace
