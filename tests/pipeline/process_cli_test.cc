@@ -73,6 +73,18 @@ class ProcessCli : public ::testing::Test {
   }
   static void TearDownTestSuite() { fs::remove_all(root_); }
   static std::string Exe() { return U3MSCAN_EXECUTABLE; }
+  // `process --quiet --preset fast OPTIONS captures/a -o ROOT/OUT` (the options before the capture:
+  // a list must not swallow the positional path).
+  static std::string FastProcessOfA(const std::string& options, const std::string& out) {
+    std::string c = Exe();
+    c += " process --quiet --preset fast ";
+    c += options;
+    c += " ";
+    c += Quote(root_ / "captures" / "a");
+    c += " -o ";
+    c += Quote(root_ / out);
+    return c;
+  }
   static fs::path root_;
 };
 fs::path ProcessCli::root_;
@@ -112,14 +124,7 @@ TEST_F(ProcessCli, HoldOutLightsAreParsedAndTheirErrorIsReported) {
   // `process --quiet --preset fast --hold-out-lights IDS captures/a -o OUT` (the list before the
   // capture: it must not swallow the positional path).
   auto command = [&](const std::string& ids, const std::string& out) {
-    std::string c = Exe();
-    c += " process --quiet --preset fast --hold-out-lights ";
-    c += ids;
-    c += " ";
-    c += Quote(root_ / "captures" / "a");
-    c += " -o ";
-    c += Quote(root_ / out);
-    return c;
+    return FastProcessOfA("--hold-out-lights " + ids, out);
   };
   ASSERT_EQ(RunShell(command("L02,L05", "held_out")), 0);
   std::ifstream in(root_ / "held_out" / "report.json");
@@ -225,16 +230,7 @@ TEST_F(ProcessCli, GnuParallelRecipeFromTheDocs) {
 // maps' dpi chooses 1 (no finer grid to solve on); `reconstruct` takes it too, and with maps at half
 // the camera's dpi solves on the camera's grid and writes maps on the maps' grid.
 TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
-  auto process = [&](const std::string& k, const std::string& out) {
-    std::string c = Exe();
-    c += " process --quiet --preset fast --ps-supersample ";
-    c += k;
-    c += " ";
-    c += Quote(root_ / "captures" / "a");
-    c += " -o ";
-    c += Quote(root_ / out);
-    return c;
-  };
+  auto process = [&](const std::string& k, const std::string& out) { return FastProcessOfA("--ps-supersample " + k, out); };
   EXPECT_EQ(RunShell(process("4", "pss_bad")), 2);
   EXPECT_FALSE(fs::exists(root_ / "pss_bad"));
   ASSERT_EQ(RunShell(process("0", "pss_auto")), 0);
