@@ -1,15 +1,17 @@
 #include "pipeline/supersampled_reconstruction.h"
 
+#include <opencv2/imgproc.hpp>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <vector>
 #include <set>
+#include <vector>
 #include <utility>
 
+#include "capture/opencv_bridge.h"
 #include "capture/stack_builder.h"
-#include "core/parallel.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/tiles.h"
 #include "reconstruction/cast_shadows.h"
@@ -25,69 +27,45 @@ constexpr double kFactorSlack = 0.05;
 // within 0.1 % of the range on plain, velvet and satin at 2x and 3x).
 constexpr double kHeightSplitSigmaPx = 4.0;
 
-// `coarse` (on `grid`) at the centres of RefineGrid(grid, k): bilinear, edges clamped.
-Image Upsample(const Image& coarse, int k) {
-  const int w = coarse.width(), h = coarse.height();
-  Image fine(w * k, h * k, coarse.channels(), 0.0f, coarse.pitch_mm() / k);
-  ParallelFor(static_cast<std::size_t>(h * k), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t fr = begin; fr < end; ++fr) {
-      const double y = std::clamp((static_cast<double>(fr) + 0.5) / k - 0.5, 0.0, h - 1.0);
-      const int r0 = std::min(static_cast<int>(y), h - 1), r1 = std::min(r0 + 1, h - 1);
-      const double fy = y - r0;
-      for (int fc = 0; fc < w * k; ++fc) {
-        const double x = std::clamp((fc + 0.5) / k - 0.5, 0.0, w - 1.0);
-        const int c0 = std::min(static_cast<int>(x), w - 1), c1 = std::min(c0 + 1, w - 1);
-        const double fx = x - c0;
-        for (int ch = 0; ch < coarse.channels(); ++ch) {
-          const double top = (1 - fx) * coarse.at(ch, r0, c0) + fx * coarse.at(ch, r0, c1);
-          const double bottom = (1 - fx) * coarse.at(ch, r1, c0) + fx * coarse.at(ch, r1, c1);
-          fine.at(ch, static_cast<int>(fr), fc) = static_cast<float>((1 - fy) * top + fy * bottom);
-        }
-      }
-    }
-  });
-  return fine;
-}
-
-Image UpsampleNearest(const Image& coarse, int k) {
-  Image fine(coarse.width() * k, coarse.height() * k, coarse.channels(), 0.0f, coarse.pitch_mm() / k);
-  for (int ch = 0; ch < coarse.channels(); ++ch) {
-    for (int r = 0; r < fine.height(); ++r) {
-      for (int c = 0; c < fine.width(); ++c) fine.at(ch, r, c) = coarse.at(ch, r / k, c / k);
-    }
+// `image` resized by `scale` (k: onto RefineGrid, 1/k: back onto the maps' grid) per plane with
+// OpenCV: INTER_LINEAR samples at the fine pixels' centres with the edges clamped, INTER_NEAREST
+// repeats each pixel k x k times, and INTER_AREA at 1/k is each k x k block's mean.
+Image Resize(const Image& image, double scale, int interpolation, double pitch_mm) {
+  const int w = static_cast<int>(std::lround(image.width() * scale));
+  const int h = static_cast<int>(std::lround(image.height() * scale));
+  Image out(w, h, image.channels(), 0.0f, pitch_mm);
+  for (int c = 0; c < image.channels(); ++c) {
+    cv::Mat to = internal::PlaneView(out, c);
+    cv::resize(internal::PlaneView(image, c), to, to.size(), 0.0, 0.0, interpolation);
   }
-  return fine;
+  return out;
 }
 
-enum class Pool { kMean, kMax };
+Image Upsample(const Image& coarse, int k) { return Resize(coarse, k, cv::INTER_LINEAR, coarse.pitch_mm() / k); }
+Image UpsampleNearest(const Image& coarse, int k) { return Resize(coarse, k, cv::INTER_NEAREST, coarse.pitch_mm() / k); }
+Image BlockMean(const Image& fine, int k, double pitch_mm) { return Resize(fine, 1.0 / k, cv::INTER_AREA, pitch_mm); }
 
-// Each k x k block of `fine` to one pixel of the maps' grid (pitch `pitch_mm`).
-Image Downsample(const Image& fine, int k, Pool pool, double pitch_mm) {
+// Each k x k block's largest value (cv::resize has no max pooling).
+Image BlockMax(const Image& fine, int k, double pitch_mm) {
   const int w = fine.width() / k, h = fine.height() / k;
   Image out(w, h, fine.channels(), 0.0f, pitch_mm);
-  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t row = begin; row < end; ++row) {
+  for (int ch = 0; ch < fine.channels(); ++ch) {
+    for (int row = 0; row < h; ++row) {
       for (int col = 0; col < w; ++col) {
-        for (int ch = 0; ch < fine.channels(); ++ch) {
-          double sum = 0.0, largest = -1e300;
-          for (int j = 0; j < k; ++j) {
-            for (int i = 0; i < k; ++i) {
-              const double v = fine.at(ch, static_cast<int>(row) * k + j, col * k + i);
-              sum += v;
-              largest = std::max(largest, v);
-            }
-          }
-          out.at(ch, static_cast<int>(row), col) = static_cast<float>(pool == Pool::kMean ? sum / (k * k) : largest);
+        float largest = fine.at(ch, row * k, col * k);
+        for (int j = 0; j < k; ++j) {
+          for (int i = 0; i < k; ++i) largest = std::max(largest, fine.at(ch, row * k + j, col * k + i));
         }
+        out.at(ch, row, col) = largest;
       }
     }
-  });
+  }
   return out;
 }
 
 // The normalised sum of each block's unit normals; a block whose normals cancel keeps +z.
 Image DownsampleNormals(const Image& fine, int k, double pitch_mm) {
-  Image out = Downsample(fine, k, Pool::kMean, pitch_mm);
+  Image out = BlockMean(fine, k, pitch_mm);
   const std::size_t n = out.pixel_count();
   float* x = out.plane(0).data();
   float* y = out.plane(1).data();
@@ -101,37 +79,12 @@ Image DownsampleNormals(const Image& fine, int k, double pitch_mm) {
   return out;
 }
 
-// Separable Gaussian blur of a 1-plane image, sigma in pixels, borders mirrored.
+// A 1-plane image blurred by a Gaussian of sigma `sigma_px`, 3 sigma either side, edges mirrored.
 Image GaussianBlur(const Image& in, double sigma_px) {
-  const int w = in.width(), h = in.height();
-  const int reach = std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px)));
-  std::vector<double> kernel(2 * reach + 1);
-  double total = 0.0;
-  for (int i = -reach; i <= reach; ++i) total += kernel[i + reach] = std::exp(-0.5 * i * i / (sigma_px * sigma_px));
-  for (double& v : kernel) v /= total;
-  auto mirror = [](int i, int n) {
-    while (i < 0 || i >= n) i = i < 0 ? -i - 1 : 2 * n - i - 1;
-    return i;
-  };
-  Image rows(w, h, 1, 0.0f, in.pitch_mm()), out(w, h, 1, 0.0f, in.pitch_mm());
-  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t r = begin; r < end; ++r) {
-      for (int c = 0; c < w; ++c) {
-        double sum = 0.0;
-        for (int i = -reach; i <= reach; ++i) sum += kernel[i + reach] * in.at(0, static_cast<int>(r), mirror(c + i, w));
-        rows.at(0, static_cast<int>(r), c) = static_cast<float>(sum);
-      }
-    }
-  });
-  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t r = begin; r < end; ++r) {
-      for (int c = 0; c < w; ++c) {
-        double sum = 0.0;
-        for (int i = -reach; i <= reach; ++i) sum += kernel[i + reach] * rows.at(0, mirror(static_cast<int>(r) + i, h), c);
-        out.at(0, static_cast<int>(r), c) = static_cast<float>(sum);
-      }
-    }
-  });
+  Image out(in.width(), in.height(), 1, 0.0f, in.pitch_mm());
+  const int size = 2 * std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px))) + 1;
+  cv::Mat to = internal::PlaneView(out, 0);
+  cv::GaussianBlur(internal::PlaneView(in, 0), to, cv::Size(size, size), sigma_px, sigma_px, cv::BORDER_REFLECT);
   return out;
 }
 
@@ -241,11 +194,11 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   SideReconstruction out;
   reconstruction::PhotometricStereoResult& ps = out.photometric_stereo;
   ps.normal = DownsampleNormals(f.normal, k, grid.pitch_mm);
-  ps.albedo = Downsample(f.albedo, k, Pool::kMean, grid.pitch_mm);
-  ps.confidence = Downsample(f.confidence, k, Pool::kMean, grid.pitch_mm);
-  ps.condition_number = Downsample(f.condition_number, k, Pool::kMax, grid.pitch_mm);
-  ps.used_lights = Downsample(f.used_lights, k, Pool::kMean, grid.pitch_mm);
-  if (!f.height_mm.empty()) ps.height_mm = Downsample(f.height_mm, k, Pool::kMean, grid.pitch_mm);
+  ps.albedo = BlockMean(f.albedo, k, grid.pitch_mm);
+  ps.confidence = BlockMean(f.confidence, k, grid.pitch_mm);
+  ps.condition_number = BlockMax(f.condition_number, k, grid.pitch_mm);
+  ps.used_lights = BlockMean(f.used_lights, k, grid.pitch_mm);
+  if (!f.height_mm.empty()) ps.height_mm = BlockMean(f.height_mm, k, grid.pitch_mm);
   ps.ill_conditioned_pixels = InMapPixels(f.ill_conditioned_pixels, k);
   ps.dark_pixels = InMapPixels(f.dark_pixels, k);
   ps.low_albedo_pixels = InMapPixels(f.low_albedo_pixels, k);
@@ -326,7 +279,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
         fine_fit.normals.set_pitch_mm(fine.stack.grid.pitch_mm);
         const Image fine_height =
             reconstruction::IntegrateNormals(fine_fit.normals, fine.side.valid, integration, progress).height_mm;
-        Image detail = Downsample(fine_height, k, Pool::kMean, stack.grid.pitch_mm);
+        Image detail = BlockMean(fine_height, k, stack.grid.pitch_mm);
         if (!fit_normals_on_grid.empty()) {
           // The fine heights' long wavelengths drift with a lean of the fine normals too small to
           // see in their angles (plain, camera at 2x: 9 um against 4 um from the maps' grid); the
