@@ -320,8 +320,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       reconstruction = ReconstructSideSupersampled(prepared, side, k, &stack, side_stages, alpha, &report, progress, &fine);
       Image fine_height;
       fit = FitSideWithFineNormals(stack, reconstruction, std::move(fine), side_stages, &report, progress, &fine_height);
-      const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
-                                    [](const LightModel& l) { return l.type == LightType::kPoint; });
+      const bool near = HasPointLights(stack);
       fitted_normals = fine_height.empty()
                            ? AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress)
                            : AdoptFineFittedNormals(&fit, std::move(fine_height), &reconstruction, &report);

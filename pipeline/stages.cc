@@ -186,8 +186,7 @@ StepRecord CastShadowStep(const StageOptions& options, double share, bool near, 
 SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress) {
   SideReconstruction out;
-  const bool near = std::any_of(stack->lights.begin(), stack->lights.end(),
-                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  const bool near = HasPointLights(*stack);
   double start = StageClock();
   reconstruction::ShadowMarkingSummary shadows;
   if (options.mark_cast_shadows) {
@@ -239,22 +238,33 @@ void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& option
   out.height_mm.set_pitch_mm(grid.pitch_mm);
 }
 
-fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
-                           RunReport* report, const ProgressCallback& progress) {
-  if (stack.views.size() < 2) {
-    report->steps.push_back({"oblique view", false,
-                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
-  }
-  const double start = StageClock();
-  fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                   geometry.height_mm};
-  fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
-  std::string detail = std::to_string(fit.clusters.size()) + " clusters";
+bool HasPointLights(const Stack& stack) {
+  return std::any_of(stack.lights.begin(), stack.lights.end(),
+                     [](const LightModel& l) { return l.type == LightType::kPoint; });
+}
+
+void ReportObliqueView(const Stack& stack, RunReport* report) {
+  if (stack.views.size() >= 2) return;
+  report->steps.push_back({"oblique view", false,
+                           "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
+}
+
+void ReportFitStep(const fitting::FitResult& fit, std::string detail, double seconds, RunReport* report) {
   if (!fit.convergence.all_converged) {
     detail += ", " + std::to_string(fit.convergence.clusters_failed) + " did not converge";
     for (const auto& message : fit.convergence.messages) report->warnings.push_back("fit: " + message);
   }
-  report->steps.push_back({"fit", true, detail, StageClock() - start});
+  report->steps.push_back({"fit", true, detail, seconds});
+}
+
+fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
+                           RunReport* report, const ProgressCallback& progress) {
+  ReportObliqueView(stack, report);
+  const double start = StageClock();
+  fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                   geometry.height_mm};
+  fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
+  ReportFitStep(fit, std::to_string(fit.clusters.size()) + " clusters", StageClock() - start, report);
   return fit;
 }
 

@@ -61,6 +61,15 @@ SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, co
 void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& options, const Image& alpha,
                    SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
 
+// True when one of the stack's lights is a point light (the near-light model and its heights apply).
+bool HasPointLights(const Stack& stack);
+
+// The fit's report: the "oblique view" step when `stack` has a single camera (none otherwise), and
+// the "fit" step, its `detail` followed by the clusters that did not converge (their messages go
+// to the warnings). FitSide, the tiled fit and the fine-grid fit all report this way.
+void ReportObliqueView(const Stack& stack, RunReport* report);
+void ReportFitStep(const fitting::FitResult& fit, std::string detail, double seconds, RunReport* report);
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 

@@ -211,8 +211,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   for (const StepRecord& s : fine_report.steps) {
     if (s.name.rfind("photometric stereo", 0) == 0 || s.name == "cast shadows") solve_seconds += s.seconds;
   }
-  const bool near = std::any_of(stack->lights.begin(), stack->lights.end(),
-                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  const bool near = HasPointLights(*stack);
   char detail[240];
   std::snprintf(detail, sizeof detail,
                 "on the %dx%d grid (%d x %d solves per map pixel), %s; the unit normals averaged onto the maps' grid",
@@ -246,10 +245,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
                                           const ProgressCallback& progress, Image* fine_height_mm) {
   if (fine_height_mm) *fine_height_mm = Image();
   if (fine.k <= 1 || !options.fit.refine_pixel_normals) return FitSide(stack, geometry, options, report, progress);
-  if (stack.views.size() < 2) {
-    report->steps.push_back({"oblique view", false,
-                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
-  }
+  ReportObliqueView(stack, report);
   const double start = StageClock();
   const int k = fine.k;
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
@@ -272,9 +268,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
       fit.normals = DownsampleNormals(fine_fit.normals, k, stack.grid.pitch_mm);
       if (fine_height_mm) {
         // As AdoptFittedNormals integrates (its integrator, also for near lights), on the fine grid.
-        const bool near = std::any_of(stack.lights.begin(), stack.lights.end(),
-                                      [](const LightModel& l) { return l.type == LightType::kPoint; });
-        reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
+        reconstruction::IntegrationOptions integration = HasPointLights(stack) ? options.photometric_stereo.integration : options.integration;
         integration.pitch_mm = fine.stack.grid.pitch_mm;
         fine_fit.normals.set_pitch_mm(fine.stack.grid.pitch_mm);
         const Image fine_height =
@@ -299,16 +293,12 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   const double fine_seconds = StageClock() - fine_start;
   fine = FineReconstruction();
   fit.times.total_s = StageClock() - start;
-  std::string detail = std::to_string(fit.clusters.size()) + " clusters; normals refined on the " +
-                       std::to_string(k) + "x finer grid";
   char seconds[64];
   std::snprintf(seconds, sizeof seconds, " (%.2f s of it)", fine_seconds);
-  detail += seconds;
-  if (!fit.convergence.all_converged) {
-    detail += ", " + std::to_string(fit.convergence.clusters_failed) + " did not converge";
-    for (const auto& message : fit.convergence.messages) report->warnings.push_back("fit: " + message);
-  }
-  report->steps.push_back({"fit", true, detail, StageClock() - start});
+  ReportFitStep(fit,
+                std::to_string(fit.clusters.size()) + " clusters; normals refined on the " + std::to_string(k) +
+                    "x finer grid" + seconds,
+                StageClock() - start, report);
   return fit;
 }
 

@@ -234,8 +234,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
     if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");  // without the frames left out
   }
-  const bool near = std::any_of(out.sample.lights.begin(), out.sample.lights.end(),
-                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  const bool near = HasPointLights(out.sample);
   // The whole-map heights the final marks come from (empty: marking off).
   Image shadow_height;
 
@@ -359,10 +358,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   const SideReconstruction& geometry = out.reconstruction;
 
   // Fit: clusters on the sample, then the per-pixel step band by band.
-  if (out.sample.views.size() < 2) {
-    report->steps.push_back({"oblique view", false,
-                             "one camera: no oblique view, so grazing lobes (sheen) cannot be observed", 0.0});
-  }
+  ReportObliqueView(out.sample, report);
   double start = StageClock();
   const double build_before_fit = bands.build_seconds();
   fitting::SurfaceGeometry sample_geometry;
@@ -387,11 +383,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on every " + std::to_string(step) +
                        "th row and column, pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() - build_before_fit) + " s included)";
-  if (!out.fit.convergence.all_converged) {
-    detail += ", " + std::to_string(out.fit.convergence.clusters_failed) + " did not converge";
-    for (const auto& message : out.fit.convergence.messages) report->warnings.push_back("fit: " + message);
-  }
-  report->steps.push_back({"fit", true, detail, StageClock() - start});
+  ReportFitStep(out.fit, std::move(detail), StageClock() - start, report);
 
   // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
   start = StageClock();
