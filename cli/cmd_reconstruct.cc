@@ -57,7 +57,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     bool flats = false;
     for (const Observation& o : stack.observations) flats = flats || !o.irradiance.empty();
     std::string lowered;
-    const int k = ChoosePsSupersample(args->ps_supersample, prepared.calibration,
+    const int k = ChoosePsSupersample(args->ps_supersample, prepared.calibration, stack,
                                       static_cast<int>(stack.observations.size()), flats, kDefaultStackBudgetGiB * 1024.0 * 1024.0 * 1024.0,
                                       &lowered);
     if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid", false, lowered, 0.0});

@@ -311,7 +311,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
       }
       std::string lowered;
-      const int k = ChoosePsSupersample(options.ps_supersample, prepared.calibration,
+      const int k = ChoosePsSupersample(options.ps_supersample, prepared.calibration, views,
                                         static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB,
                                         &lowered);
       if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid " + side, false, lowered, 0.0});

@@ -13,6 +13,7 @@
 #include "capture/opencv_bridge.h"
 #include "capture/stack_builder.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
@@ -117,26 +118,22 @@ long long InMapPixels(long long fine_count, int k) { return (fine_count + k * k 
 
 }  // namespace
 
-int PsSupersampleForCameras(const CalibrationResult& calibration) {
+int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views) {
+  const int top = MostVerticalView(views);
+  const CameraCalibration* camera =
+      top < 0 ? nullptr : calibration.FindCamera(views.views.at(static_cast<std::size_t>(top)).camera_id);
+  if (!camera) return 1;
   const MetricGrid& grid = calibration.grid;
-  const Eigen::Vector3d centre = grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, calibration.surface_z_mm);
-  const CameraCalibration* top = nullptr;
-  double best_tilt = 1e300;
-  for (const CameraCalibration& camera : calibration.cameras) {
-    const Eigen::Vector3d axis = (camera.model.CentreInWorld() - centre).normalized();
-    const double tilt = std::acos(std::clamp(axis.z(), -1.0, 1.0));
-    if (tilt < best_tilt) best_tilt = tilt, top = &camera;
-  }
-  if (!top) return 1;
-  const double pitch = top->model.PitchOnPlaneMm(centre);
+  const double pitch =
+      camera->model.PitchOnPlaneMm(grid.PixelCentreInWorld(grid.width / 2, grid.height / 2, calibration.surface_z_mm));
   if (!(pitch > 0.0)) return 1;
   return std::clamp(static_cast<int>(std::floor(grid.pitch_mm / pitch + kFactorSlack)), 1, kMaxPsSupersample);
 }
 
-int ChoosePsSupersample(int requested, const CalibrationResult& calibration, int observations, bool flats,
-                        double budget_bytes, std::string* why) {
+int ChoosePsSupersample(int requested, const CalibrationResult& calibration, const Stack& views, int observations,
+                        bool flats, double budget_bytes, std::string* why) {
   if (why) why->clear();
-  int k = requested == 0 ? PsSupersampleForCameras(calibration) : std::clamp(requested, 1, kMaxPsSupersample);
+  int k = requested == 0 ? PsSupersampleForCameras(calibration, views) : std::clamp(requested, 1, kMaxPsSupersample);
   const int wanted = k;
   while (k > 1 && PlanTiles(RefineGrid(calibration.grid, k), observations, flats, budget_bytes).bands > 1) --k;
   if (why && k < wanted) {

@@ -28,17 +28,18 @@ namespace u3mscan {
 // third of its resolution needs its whole resolution: 9 times the maps' stack).
 inline constexpr int kMaxPsSupersample = 3;
 
-// The factor a capture's cameras support: the floor of the most vertical camera's pixels per map
-// pixel (at the grid's centre, on the face's plane), within [1, kMaxPsSupersample]. A camera at
-// 2.98 px per map px (rounding of its dpi) counts as 3.
-int PsSupersampleForCameras(const CalibrationResult& calibration);
+// The factor a side's cameras support: the floor of its most vertical view's camera pixels per map
+// pixel (at the grid's centre, on the face's plane), within [1, kMaxPsSupersample]. `views`: the
+// side's views (SideViews, or its stack). A camera at 2.98 px per map px (rounding of its dpi)
+// counts as 3.
+int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views);
 
-// The factor a run uses: `requested` (0: PsSupersampleForCameras; else 1..kMaxPsSupersample),
+// The factor a run uses: `requested` (0: PsSupersampleForCameras of `views`; else 1..kMaxPsSupersample),
 // lowered until the fine stack of `observations` frames fits `budget_bytes` in one band
 // (PlanTiles; a scan that needs bands on the maps' grid gets 1). `why` (when not null) says what
 // lowered it, or is cleared.
-int ChoosePsSupersample(int requested, const CalibrationResult& calibration, int observations, bool flats,
-                        double budget_bytes, std::string* why);
+int ChoosePsSupersample(int requested, const CalibrationResult& calibration, const Stack& views, int observations,
+                        bool flats, double budget_bytes, std::string* why);
 
 // The grid over the same region with k x k pixels for each of `grid`'s (pitch / k; fine pixel
 // (k col + i, k row + j) is the (i, j) part of pixel (col, row)).
