@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <sstream>
+#include <stdexcept>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -441,6 +442,13 @@ json EvaluationToJson(const Evaluation& ev) {
           {"height", {{"rmse_mm", Number(ev.height_rmse_mm)}, {"range_mm", Number(ev.height_range_mm)}, {"rmse_percent_of_range", Number(ev.height_rmse_percent)}}},
           {"parameters", parameters},
           {"rerender", {{"held_out_lights", ev.held_out_lights}, {"relative_rmse", Number(ev.rerender_relative_rmse)}}}};
+}
+
+const ParameterError& FindParameter(const Evaluation& evaluation, const std::string& name) {
+  for (const ParameterError& p : evaluation.parameters) {
+    if (p.name == name) return p;
+  }
+  throw std::out_of_range("FindParameter: no parameter " + name + " in the evaluation");
 }
 
 std::string EvaluationToText(const Evaluation& ev) {

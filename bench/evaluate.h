@@ -67,6 +67,10 @@ struct Evaluation {
 Evaluation Evaluate(const std::filesystem::path& output_dir, const std::filesystem::path& truth_dir,
                     const EvaluateOptions& options = {});
 
+// The figures of parameter `name` (ParameterError::name: roughness, specular, ...); throws
+// std::out_of_range when the evaluation has none by that name.
+const ParameterError& FindParameter(const Evaluation& evaluation, const std::string& name);
+
 nlohmann::json EvaluationToJson(const Evaluation& evaluation);
 // Every figure, one per line, for people.
 std::string EvaluationToText(const Evaluation& evaluation);

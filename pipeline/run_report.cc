@@ -17,6 +17,13 @@ const char* ParameterSourceName(ParameterSource source) {
   return "unknown";
 }
 
+const StepRecord* FindStep(const RunReport& report, const std::string& name) {
+  for (const StepRecord& step : report.steps) {
+    if (step.name == name) return &step;
+  }
+  return nullptr;
+}
+
 nlohmann::json RunReportToJson(const RunReport& report) {
   nlohmann::json j;
   j["capture"] = {{"name", report.capture_name}, {"path", report.capture_path}};

@@ -69,6 +69,9 @@ struct RunReport {
   double peak_memory_mib = 0.0;
 };
 
+// The first step of that name, or nullptr.
+const StepRecord* FindStep(const RunReport& report, const std::string& name);
+
 nlohmann::json RunReportToJson(const RunReport& report);
 
 // Writes a self-contained HTML page (thumbnails embedded as base64 PNG, no network, no scripts).

@@ -32,13 +32,6 @@ constexpr double kSheenTintTolerance = 0.1;
 constexpr double kAnisotropicTolerance = 0.1;
 constexpr int kCameraPixels = 64;
 
-const bench::ParameterError& Parameter(const bench::Evaluation& e, const std::string& name) {
-  for (const auto& p : e.parameters) {
-    if (p.name == name) return p;
-  }
-  throw std::runtime_error("no parameter " + name + " in the evaluation");
-}
-
 bench::Evaluation ProcessVelvetBumps(const test::TempDir& dir, const std::string& rig) {
   synthetic::SynthOptions synth;
   synth.scene = "velvet_bumps";
@@ -68,7 +61,7 @@ TEST(ObliqueSheen, TheObliqueCameraMeasuresEveryLobeOfTheVelvetWithinTheIssueTar
   for (const Target& t : {Target{"roughness", kRoughnessTolerance}, Target{"specular", kSpecularTolerance},
                           Target{"sheen", kSheenTolerance}, Target{"sheen_tint", kSheenTintTolerance},
                           Target{"anisotropic", kAnisotropicTolerance}}) {
-    const bench::ParameterError& p = Parameter(e, t.name);
+    const bench::ParameterError& p = bench::FindParameter(e, t.name);
     ASSERT_TRUE(p.measured) << t.name << " was left out";
     EXPECT_TRUE(p.reliable) << t.name << " was flagged";
     EXPECT_LT(p.mean_abs_error, t.tolerance)
@@ -83,9 +76,9 @@ TEST(ObliqueSheen, WithoutTheObliqueCameraSheenIsLeftOut) {
   test::TempDir dir;
   const bench::Evaluation e = ProcessVelvetBumps(dir, "near");
   ASSERT_GT(e.pixels_compared, 0);
-  EXPECT_FALSE(Parameter(e, "sheen").measured);
-  EXPECT_FALSE(Parameter(e, "sheen_tint").measured);
-  const bench::ParameterError& roughness = Parameter(e, "roughness");
+  EXPECT_FALSE(bench::FindParameter(e, "sheen").measured);
+  EXPECT_FALSE(bench::FindParameter(e, "sheen_tint").measured);
+  const bench::ParameterError& roughness = bench::FindParameter(e, "roughness");
   ASSERT_TRUE(roughness.measured);
   EXPECT_LT(roughness.mean_abs_error, kRoughnessTolerance);
 }

@@ -64,13 +64,6 @@ void LeaveBorderOutOfComparison(const fs::path& truth_dir) {
   WriteImageFile(alpha, path, options);
 }
 
-const bench::ParameterError& Parameter(const bench::Evaluation& e, const std::string& name) {
-  for (const auto& p : e.parameters) {
-    if (p.name == name) return p;
-  }
-  throw std::runtime_error("no parameter " + name + " in the evaluation");
-}
-
 // The scanner's calibration frames: only its radiometric ones (dark, a flat per light; geometry and
 // colour from the manifest, so the errors are the chain's own), or every one (the lights from the
 // mirror spheres, the pose from the board, colour from the chart: the whole calibration chain).
@@ -121,8 +114,8 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
   EXPECT_LT(e.normal_mean_deg, kNormalMeanDeg);
   EXPECT_LT(e.base_color_de_mean, kBaseColorDeltaE);
   EXPECT_LT(e.height_rmse_percent, kHeightRmsePercent);
-  const bench::ParameterError& roughness = Parameter(e, "roughness");
-  const bench::ParameterError& specular = Parameter(e, "specular");
+  const bench::ParameterError& roughness = bench::FindParameter(e, "roughness");
+  const bench::ParameterError& specular = bench::FindParameter(e, "specular");
   ASSERT_TRUE(roughness.measured);
   ASSERT_TRUE(specular.measured);
   EXPECT_TRUE(roughness.reliable);
@@ -130,7 +123,7 @@ TEST_P(ProcessTruth, MapsMatchTheTruthWithinTheIssueTargets) {
   EXPECT_LT(roughness.mean_abs_error, kRoughnessTolerance);
   EXPECT_LT(specular.mean_abs_error, kSpecularTolerance);
   // Sheen (truth 0) cannot be measured from an overhead camera: it must be left out, not reported.
-  EXPECT_FALSE(Parameter(e, "sheen").measured);
+  EXPECT_FALSE(bench::FindParameter(e, "sheen").measured);
   ASSERT_GT(e.held_out_lights, 0);
   EXPECT_LT(e.rerender_relative_rmse, kRerenderTolerance);
 }

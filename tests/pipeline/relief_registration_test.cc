@@ -157,13 +157,6 @@ TEST(ReliefRegistration, WhatATiltedViewCannotSeeIsOutOfView) {
   EXPECT_NEAR(share, 10.0 / 32.0, 2.0 / 32.0);
 }
 
-const StepRecord* FindStep(const RunReport& report, const std::string& name) {
-  for (const StepRecord& s : report.steps) {
-    if (s.name == name) return &s;
-  }
-  return nullptr;
-}
-
 // The capture `synth` describes, rendered without calibration frames and processed (fast, debug
 // maps) into dir/whole in one band and into dir/banded with a budget of 1/`divisor` of its stack.
 struct OneBandAndBands {

@@ -24,13 +24,6 @@ constexpr double kMapDpi = 300.0;
 constexpr double kMaxNormalErrorRatio = 0.85;
 constexpr double kMaxHeightErrorRatio = 0.8;
 
-const StepRecord* FindStep(const RunReport& report, const std::string& name) {
-  for (const StepRecord& s : report.steps) {
-    if (s.name == name) return &s;
-  }
-  return nullptr;
-}
-
 std::filesystem::path PlainAtTwiceTheMapsDpi(const test::TempDir& dir) {
   synthetic::SynthOptions synth;
   synth.scene = "plain";
