@@ -64,7 +64,8 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_option("--ps-supersample", args->options.ps_supersample,
                  "Photometric stereo on a grid K times finer than the maps (a camera at K times their dpi resolves "
                  "it), the normals averaged onto them: 1 = off, 2 or 3, 0 = as fine as the top camera resolves. "
-                 "Closer normals on woven fabric (docs/reconstruction.md); K^2 times the stack's memory, one band only")
+                 "Closer normals on woven fabric (docs/reconstruction.md); K^2 times the stack's memory (processed in bands "
+                 "on the finer grid when that exceeds --max-memory)")
       ->capture_default_str();
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "

@@ -288,7 +288,19 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       const FrameSpec& spec = manifest.frames[index];
       flats = flats || (spec.light && prepared.calibration.FindFlat(spec.camera, *spec.light, side));
     }
-    const TilePlan plan = PlanTiles(grid, static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB);
+    // A tilted view: its frames registered on the relief (one band) and the normals taken from the
+    // most vertical view (relief_registration.h). Decided from the cameras, before any stack.
+    StageOptions side_stages = stages;
+    const Stack views = SideViews(prepared, side);
+    const bool tilted_view = NeedsReliefRegistration(views);
+    if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
+    // --ps-supersample: photometric stereo on a grid k times finer; the bands are planned so that
+    // each one's fine stack fits the budget (one band when the whole fine stack does).
+    const int k = options.ps_supersample == 0 ? PsSupersampleForCameras(prepared.calibration, views)
+                                              : std::clamp(options.ps_supersample, 1, kMaxPsSupersample);
+    const TilePlan plan =
+        PlanTiles(grid, static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB, k);
+    report.options["ps_supersample_" + side] = k;
     Stack stack;  // the whole stack (untiled), or the fit's sample (tiled): thumbnails
     SideReconstruction reconstruction;
     fitting::FitResult fit;
@@ -296,12 +308,6 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     Image residual;
     double residual_mean = 0.0;
     std::optional<HeldOutCheck> held_out_check;
-    // A tilted view: its frames registered on the relief (one band) and the normals taken from the
-    // most vertical view (relief_registration.h). Decided from the cameras, before any stack.
-    StageOptions side_stages = stages;
-    const Stack views = SideViews(prepared, side);
-    const bool tilted_view = NeedsReliefRegistration(views);
-    if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
     if (plan.bands == 1) {
       stack = BuildSideStack(prepared, side, stages, &report, progress);
       std::vector<Observation> held_out;
@@ -310,12 +316,6 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
         stack = BuildSideStackOnRelief(prepared, side, stages, alpha, std::move(stack), &report, progress);
         if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
       }
-      std::string lowered;
-      const int k = ChoosePsSupersample(options.ps_supersample, prepared.calibration, views,
-                                        static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB,
-                                        &lowered);
-      if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid " + side, false, lowered, 0.0});
-      report.options["ps_supersample_" + side] = k;
       FineReconstruction fine;
       reconstruction = ReconstructSideSupersampled(prepared, side, k, &stack, side_stages, alpha, &report, progress, &fine);
       Image fine_height;
@@ -328,12 +328,6 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
       if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
     } else {
-      if (options.ps_supersample != 1) {
-        report.steps.push_back({"photometric stereo on a finer grid " + side, false,
-                                "processed in bands: photometric stereo runs on the maps' grid (docs/process.md, Large scans)",
-                                0.0});
-      }
-      report.options["ps_supersample_" + side] = 1;
       TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
                                          options.hold_out_lights, &report, progress);
       held_out_check = std::move(tiled.held_out);

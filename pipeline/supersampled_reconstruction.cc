@@ -1,7 +1,5 @@
 #include "pipeline/supersampled_reconstruction.h"
 
-#include <opencv2/imgproc.hpp>
-
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -10,9 +8,9 @@
 #include <vector>
 #include <utility>
 
-#include "capture/opencv_bridge.h"
 #include "capture/stack_builder.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
 #include "reconstruction/cast_shadows.h"
@@ -23,79 +21,6 @@ namespace {
 
 // A camera at 2.98 px per map px (its dpi rounded) supports 3: the floor is taken this much above.
 constexpr double kFactorSlack = 0.05;
-// Where the height's long wavelengths (from the maps' grid) meet its detail (from the fine grid):
-// sigma of the Gaussian that splits them, map pixels (measured: 4 and 8 give the same heights to
-// within 0.1 % of the range on plain, velvet and satin at 2x and 3x).
-constexpr double kHeightSplitSigmaPx = 4.0;
-
-// `image` resized by `scale` (k: onto RefineGrid, 1/k: back onto the maps' grid) per plane with
-// OpenCV: INTER_LINEAR samples at the fine pixels' centres with the edges clamped, INTER_NEAREST
-// repeats each pixel k x k times, and INTER_AREA at 1/k is each k x k block's mean.
-Image Resize(const Image& image, double scale, int interpolation, double pitch_mm) {
-  const int w = static_cast<int>(std::lround(image.width() * scale));
-  const int h = static_cast<int>(std::lround(image.height() * scale));
-  Image out(w, h, image.channels(), 0.0f, pitch_mm);
-  for (int c = 0; c < image.channels(); ++c) {
-    cv::Mat to = internal::PlaneView(out, c);
-    cv::resize(internal::PlaneView(image, c), to, to.size(), 0.0, 0.0, interpolation);
-  }
-  return out;
-}
-
-Image Upsample(const Image& coarse, int k) { return Resize(coarse, k, cv::INTER_LINEAR, coarse.pitch_mm() / k); }
-Image UpsampleNearest(const Image& coarse, int k) { return Resize(coarse, k, cv::INTER_NEAREST, coarse.pitch_mm() / k); }
-Image BlockMean(const Image& fine, int k, double pitch_mm) { return Resize(fine, 1.0 / k, cv::INTER_AREA, pitch_mm); }
-
-// Each k x k block's largest value (cv::resize has no max pooling).
-Image BlockMax(const Image& fine, int k, double pitch_mm) {
-  const int w = fine.width() / k, h = fine.height() / k;
-  Image out(w, h, fine.channels(), 0.0f, pitch_mm);
-  for (int ch = 0; ch < fine.channels(); ++ch) {
-    for (int row = 0; row < h; ++row) {
-      for (int col = 0; col < w; ++col) {
-        float largest = fine.at(ch, row * k, col * k);
-        for (int j = 0; j < k; ++j) {
-          for (int i = 0; i < k; ++i) largest = std::max(largest, fine.at(ch, row * k + j, col * k + i));
-        }
-        out.at(ch, row, col) = largest;
-      }
-    }
-  }
-  return out;
-}
-
-// The normalised sum of each block's unit normals; a block whose normals cancel keeps +z.
-Image DownsampleNormals(const Image& fine, int k, double pitch_mm) {
-  Image out = BlockMean(fine, k, pitch_mm);
-  const std::size_t n = out.pixel_count();
-  float* x = out.plane(0).data();
-  float* y = out.plane(1).data();
-  float* z = out.plane(2).data();
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3f v(x[i], y[i], z[i]);
-    const float length = v.norm();
-    const Eigen::Vector3f u = length > 1e-6f && std::isfinite(length) ? Eigen::Vector3f(v / length) : Eigen::Vector3f::UnitZ();
-    x[i] = u.x(), y[i] = u.y(), z[i] = u.z();
-  }
-  return out;
-}
-
-// A 1-plane image blurred by a Gaussian of sigma `sigma_px`, 3 sigma either side, edges mirrored.
-Image GaussianBlur(const Image& in, double sigma_px) {
-  Image out(in.width(), in.height(), 1, 0.0f, in.pitch_mm());
-  const int size = 2 * std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px))) + 1;
-  cv::Mat to = internal::PlaneView(out, 0);
-  cv::GaussianBlur(internal::PlaneView(in, 0), to, cv::Size(size, size), sigma_px, sigma_px, cv::BORDER_REFLECT);
-  return out;
-}
-
-// The fine calibration: the same cameras, lights and corrections on RefineGrid(grid, k).
-CalibrationResult FineCalibration(const CalibrationResult& calibration, int k) {
-  CalibrationResult fine = calibration;
-  fine.grid = RefineGrid(calibration.grid, k);
-  for (FlatCalibration& flat : fine.flats) flat.irradiance = Upsample(flat.irradiance, k);
-  return fine;
-}
 
 // The side's sample frames (manifest indices) of the (camera, light) pairs `stack` holds, and of
 // those only view `only_view`'s camera when it is >= 0.
@@ -113,8 +38,6 @@ std::vector<std::size_t> FramesOf(const Manifest& manifest, const std::string& s
   }
   return frames;
 }
-
-long long InMapPixels(long long fine_count, int k) { return (fine_count + k * k / 2) / (k * k); }
 
 }  // namespace
 
@@ -141,14 +64,6 @@ int ChoosePsSupersample(int requested, const CalibrationResult& calibration, con
            (k > 1 ? std::to_string(k) + "x" : "on the maps' grid");
   }
   return k;
-}
-
-MetricGrid RefineGrid(const MetricGrid& grid, int k) {
-  MetricGrid fine = grid;
-  fine.width = grid.width * k;
-  fine.height = grid.height * k;
-  fine.pitch_mm = grid.pitch_mm / k;
-  return fine;
 }
 
 SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, const std::string& side, int k,
@@ -189,21 +104,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   const reconstruction::PhotometricStereoResult& f = fine_side.photometric_stereo;
   start = StageClock();
   SideReconstruction out;
-  reconstruction::PhotometricStereoResult& ps = out.photometric_stereo;
-  ps.normal = DownsampleNormals(f.normal, k, grid.pitch_mm);
-  ps.albedo = BlockMean(f.albedo, k, grid.pitch_mm);
-  ps.confidence = BlockMean(f.confidence, k, grid.pitch_mm);
-  ps.condition_number = BlockMax(f.condition_number, k, grid.pitch_mm);
-  ps.used_lights = BlockMean(f.used_lights, k, grid.pitch_mm);
-  if (!f.height_mm.empty()) ps.height_mm = BlockMean(f.height_mm, k, grid.pitch_mm);
-  ps.ill_conditioned_pixels = InMapPixels(f.ill_conditioned_pixels, k);
-  ps.dark_pixels = InMapPixels(f.dark_pixels, k);
-  ps.low_albedo_pixels = InMapPixels(f.low_albedo_pixels, k);
-  ps.clamped_normal_pixels = InMapPixels(f.clamped_normal_pixels, k);
-  ps.regularised_pixels = InMapPixels(f.regularised_pixels, k);
-  ps.near_iterations = f.near_iterations;
-  ps.diffuse_roughness = f.diffuse_roughness;
-  ps.last_normal_change_deg = f.last_normal_change_deg;
+  out.photometric_stereo = AveragePhotometricStereoOntoMaps(f, k, grid.pitch_mm);
   double solve_seconds = 0.0;
   for (const StepRecord& s : fine_report.steps) {
     if (s.name.rfind("photometric stereo", 0) == 0 || s.name == "cast shadows") solve_seconds += s.seconds;
@@ -237,6 +138,21 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   return out;
 }
 
+Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& maps_normals,
+                                  const Image& maps_valid, int k, bool near, const StageOptions& options,
+                                  const ProgressCallback& progress) {
+  // AdoptFittedNormals' integrator (also for near lights), on each grid.
+  reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
+  const double maps_pitch = maps_normals.pitch_mm();
+  integration.pitch_mm = maps_pitch / k;
+  fine_normals.set_pitch_mm(integration.pitch_mm);
+  const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
+  fine_normals = Image();
+  integration.pitch_mm = maps_pitch;
+  const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
+  return HeightFromFineAndMapsGrids(fine_height, maps_height, k);
+}
+
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
                                           const StageOptions& options, RunReport* report,
                                           const ProgressCallback& progress, Image* fine_height_mm) {
@@ -262,28 +178,10 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
     if (!fine_fit.normals.empty()) {
       Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
-      fit.normals = DownsampleNormals(fine_fit.normals, k, stack.grid.pitch_mm);
+      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm);
       if (fine_height_mm) {
-        // As AdoptFittedNormals integrates (its integrator, also for near lights), on the fine grid.
-        reconstruction::IntegrationOptions integration = HasPointLights(stack) ? options.photometric_stereo.integration : options.integration;
-        integration.pitch_mm = fine.stack.grid.pitch_mm;
-        fine_fit.normals.set_pitch_mm(fine.stack.grid.pitch_mm);
-        const Image fine_height =
-            reconstruction::IntegrateNormals(fine_fit.normals, fine.side.valid, integration, progress).height_mm;
-        Image detail = BlockMean(fine_height, k, stack.grid.pitch_mm);
-        if (!fit_normals_on_grid.empty()) {
-          // The fine heights' long wavelengths drift with a lean of the fine normals too small to
-          // see in their angles (plain, camera at 2x: 9 um against 4 um from the maps' grid); the
-          // maps' grid integration of the normals refined there gives those, the fine heights the rest.
-          integration.pitch_mm = stack.grid.pitch_mm;
-          const Image coarse =
-              reconstruction::IntegrateNormals(fit_normals_on_grid, geometry.valid, integration, progress).height_mm;
-          const Image low = GaussianBlur(coarse, kHeightSplitSigmaPx), detail_low = GaussianBlur(detail, kHeightSplitSigmaPx);
-          for (std::size_t i = 0; i < detail.pixel_count(); ++i) {
-            detail.data()[i] = low.data()[i] + detail.data()[i] - detail_low.data()[i];
-          }
-        }
-        *fine_height_mm = std::move(detail);
+        *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, fit_normals_on_grid,
+                                                      geometry.valid, k, HasPointLights(stack), options, progress);
       }
     }
   }

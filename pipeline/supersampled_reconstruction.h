@@ -19,6 +19,7 @@
 #include "core/image.h"
 #include "core/stack.h"
 #include "fitting/principled_fit.h"
+#include "pipeline/fine_grid.h"
 #include "pipeline/run_report.h"
 #include "pipeline/stages.h"
 
@@ -34,16 +35,13 @@ inline constexpr int kMaxPsSupersample = 3;
 // counts as 3.
 int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views);
 
-// The factor a run uses: `requested` (0: PsSupersampleForCameras of `views`; else 1..kMaxPsSupersample),
-// lowered until the fine stack of `observations` frames fits `budget_bytes` in one band
+// The factor a run without bands uses (`reconstruct`; `process` plans bands on the finer grid
+// instead, PlanTiles' fine_factor): `requested` (0: PsSupersampleForCameras of `views`; else
+// 1..kMaxPsSupersample), lowered until the fine stack of `observations` frames fits `budget_bytes` in one band
 // (PlanTiles; a scan that needs bands on the maps' grid gets 1). `why` (when not null) says what
 // lowered it, or is cleared.
 int ChoosePsSupersample(int requested, const CalibrationResult& calibration, const Stack& views, int observations,
                         bool flats, double budget_bytes, std::string* why);
-
-// The grid over the same region with k x k pixels for each of `grid`'s (pitch / k; fine pixel
-// (k col + i, k row + j) is the (i, j) part of pixel (col, row)).
-MetricGrid RefineGrid(const MetricGrid& grid, int k);
 
 // ReconstructSide with photometric stereo on RefineGrid(calibration grid, k). `stack` is the side's
 // stack on the maps' grid as the fit will use it: only the frames it holds (by camera and light:
@@ -85,6 +83,14 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
                                           const StageOptions& options, RunReport* report,
                                           const ProgressCallback& progress = {}, Image* fine_height_mm = nullptr);
+
+// The height of normals refined on the fine grid (`fine_normals`, its `fine_valid`; consumed) and
+// on the maps' grid (`maps_normals`, its pitch the maps', `maps_valid`): each integrated with
+// AdoptFittedNormals' integrator (`near`: the near-light one) and joined by
+// HeightFromFineAndMapsGrids. FitSideWithFineNormals' height, and the banded path's.
+Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& maps_normals,
+                                  const Image& maps_valid, int k, bool near, const StageOptions& options,
+                                  const ProgressCallback& progress = {});
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
 // the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the

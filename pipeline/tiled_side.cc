@@ -8,7 +8,9 @@
 #include "capture/stack_builder.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
+#include "pipeline/supersampled_reconstruction.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
@@ -18,27 +20,30 @@ namespace {
 
 using reconstruction::PhotometricStereoResult;
 
-// The band Stacks of one side, built again on every sweep; times the building.
+// The band Stacks of one side, built again on every sweep; times the building. On the maps' grid,
+// or (`fine_factor` k > 1) on the fine grid of --ps-supersample: band b is then the fine rows of the
+// maps' band b (k times as many).
 class Bands {
  public:
-  Bands(const PreparedCapture& prepared, const std::string& side, const StageOptions& options, const TilePlan& plan)
-      : prepared_(prepared), plan_(plan) {
-    calibration_ = options.calibration;
-    calibration_.side = side;
+  Bands(const Capture& capture, const CalibrationResult& calibration, const std::string& side, const StageOptions& options,
+        const TilePlan& plan, int fine_factor = 1)
+      : capture_(capture), calibration_(calibration), bands_(plan.bands), band_rows_(plan.band_rows * fine_factor) {
+    options_ = options.calibration;
+    options_.side = side;
   }
-  int count() const { return plan_.bands; }
-  int Row0(int band) const { return band * plan_.band_rows; }
-  int Rows(int band) const { return std::min(plan_.band_rows, prepared_.calibration.grid.height - Row0(band)); }
+  int count() const { return bands_; }
+  int Row0(int band) const { return band * band_rows_; }
+  int Rows(int band) const { return std::min(band_rows_, calibration_.grid.height - Row0(band)); }
+  const MetricGrid& grid() const { return calibration_.grid; }
   // From here on every band is built at these heights (the whole grid's, mm, world z) and its
   // pixels hidden from a tilted view are marked (relief_registration.h).
   void PutOnRelief(Image surface_z_mm) { relief_ = std::move(surface_z_mm); }
   Stack Build(const std::vector<std::size_t>& frames, int band) {
     const double start = StageClock();
-    Stack stack = BuildStackRows(prepared_.capture, prepared_.calibration, calibration_, frames, Row0(band), Rows(band),
-                                 {}, relief_);
+    Stack stack = BuildStackRows(capture_, calibration_, options_, frames, Row0(band), Rows(band), {}, relief_);
     if (!relief_.empty()) {
       const double pixels = static_cast<double>(stack.grid.width) * stack.grid.height;
-      hidden_sum_ += MarkHiddenFromTiltedViews(relief_, prepared_.calibration.grid, &stack) * pixels;
+      hidden_sum_ += MarkHiddenFromTiltedViews(relief_, calibration_.grid, &stack) * pixels;
       hidden_pixels_ += pixels;
     }
     build_seconds_ += StageClock() - start;
@@ -51,9 +56,10 @@ class Bands {
   double hidden_share() const { return hidden_pixels_ > 0.0 ? hidden_sum_ / hidden_pixels_ : 0.0; }
 
  private:
-  const PreparedCapture& prepared_;
-  const TilePlan& plan_;
-  CalibrationOptions calibration_;
+  const Capture& capture_;
+  const CalibrationResult& calibration_;
+  int bands_ = 1, band_rows_ = 0;
+  CalibrationOptions options_;
   Image relief_;
   double build_seconds_ = 0.0;
   int builds_ = 0;
@@ -149,7 +155,13 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   const MetricGrid& grid = prepared.calibration.grid;
   // A copy: the diffuse roughness, once chosen on the sample, is fixed for every band.
   reconstruction::PhotometricStereoOptions ps_options = options.photometric_stereo;
-  Bands bands(prepared, side, options, plan);
+  Bands bands(prepared.capture, prepared.calibration, side, options, plan);
+  // --ps-supersample (plan.fine_factor k > 1): photometric stereo, and the fit's normal refinement,
+  // on bands of the grid k times finer (pipeline/fine_grid.h); every other sweep on the maps' grid.
+  const int fine_factor = plan.fine_factor;
+  const CalibrationResult fine_calibration =
+      fine_factor > 1 ? FineCalibration(prepared.calibration, fine_factor) : CalibrationResult();
+  Bands fine_bands(prepared.capture, fine_calibration, side, options, plan, fine_factor);
   std::vector<std::size_t> frames = SideSampleFrames(prepared.capture.manifest(), side);
   // Held-out lights: their frames take no part in any sweep until the check at the end.
   const std::vector<std::size_t> held_out_frames =
@@ -166,35 +178,59 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // (its rows offset), so that shadows cast from outside the band are found as in a one-band run.
   double shadow_seconds = 0.0;
   reconstruction::CastShadowCounts shadow_counts;  // of the last photometric stereo sweep
-  auto mark = [&](const Image& height, Stack* stack) {
+  auto mark = [&](const Image& height, const MetricGrid& height_grid, Stack* stack) {
     const double start = StageClock();
-    const reconstruction::CastShadowCounts counts = reconstruction::MarkCastShadows(height, grid, stack, options.cast_shadows);
+    const reconstruction::CastShadowCounts counts =
+        reconstruction::MarkCastShadows(height, height_grid, stack, options.cast_shadows);
     shadow_seconds += StageClock() - start;
     return counts;
   };
 
   // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
-  // cast shadows marked from the whole-map heights `marks_from` (nullptr: none).
+  // cast shadows marked from the whole-map heights `marks_from` (nullptr: none). With a fine factor
+  // the bands are the fine grid's, the heights taken there bilinearly, and each band's result
+  // averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be null
+  // (the sample is on the maps' grid: a sweep of its own gathers it).
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage) {
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
-    for (int b = 0; b < bands.count(); ++b) {
-      Stack band = bands.Build(frames, b);
+    Bands& solved = fine_factor > 1 ? fine_bands : bands;
+    const MetricGrid& solve_grid = solved.grid();
+    Image fine_height, fine_marks;
+    if (fine_factor > 1 && height) fine_height = UpsampleLinear(*height, fine_factor);
+    if (fine_factor > 1 && marks_from && marks_from != height) fine_marks = UpsampleLinear(*marks_from, fine_factor);
+    const Image* solve_height = fine_factor > 1 ? (height ? &fine_height : nullptr) : height;
+    const Image* marks = fine_factor > 1 ? (marks_from ? (marks_from == height ? &fine_height : &fine_marks) : nullptr) : marks_from;
+    for (int b = 0; b < solved.count(); ++b) {
+      Stack band = solved.Build(frames, b);
       if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
-      if (marks_from) {
-        const reconstruction::CastShadowCounts counts = mark(*marks_from, &band);
+      if (marks) {
+        const reconstruction::CastShadowCounts counts = mark(*marks, solve_grid, &band);
         shadow_counts.marked += counts.marked;
         shadow_counts.examined += counts.examined;
       }
       const double start = StageClock();
-      const Image band_height = height ? CropRows(*height, bands.Row0(b), bands.Rows(b))
-                                       : Image(grid.width, bands.Rows(b), 1,
-                                               static_cast<float>(ps_options.integration.mean_height_mm), grid.pitch_mm);
-      PasteBand(reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height), bands.Row0(b), &full);
+      const Image band_height =
+          solve_height ? CropRows(*solve_height, solved.Row0(b), solved.Rows(b))
+                       : Image(solve_grid.width, solved.Rows(b), 1, static_cast<float>(ps_options.integration.mean_height_mm),
+                               solve_grid.pitch_mm);
+      PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
+      if (fine_factor > 1) band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm);
+      PasteBand(band_ps, bands.Row0(b), &full);
       solve_seconds += StageClock() - start;
       ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
     }
     return full;
+  };
+
+  // The fit's sample alone, one sweep of the maps' bands (built at the relief once PutOnRelief).
+  auto sample_sweep = [&](const char* stage) {
+    Stack sample;
+    for (int b = 0; b < bands.count(); ++b) {
+      AddToSample(bands.Build(frames, b), bands.Row0(b), step, sample_grid, &sample);
+      ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
+    }
+    return sample;
   };
 
   // The Burley diffuse roughness is one value for the whole side (RunPhotometricStereo estimates it
@@ -212,12 +248,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     return true;
   };
   PhotometricStereoResult ps;
-  if (choose_roughness) {
-    for (int b = 0; b < bands.count(); ++b) {
-      AddToSample(bands.Build(frames, b), bands.Row0(b), step, sample_grid, &out.sample);
-      ReportProgress(progress, "photometric stereo (sample)", static_cast<double>(b + 1) / bands.count());
-    }
+  if (choose_roughness || fine_factor > 1) {
+    out.sample = sample_sweep("photometric stereo (sample)");
     keep_checked_frames();
+  }
+  if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
     solve_seconds += StageClock() - start;
@@ -229,6 +264,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
     ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");
+  } else if (fine_factor > 1) {
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");  // on the fine bands, the sample taken above
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
@@ -290,18 +327,27 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
   ps.diffuse_roughness =
       ps_options.diffuse_model == reconstruction::DiffuseModel::kBurley ? ps_options.diffuse_roughness : -1.0;
-  const int ps_builds = bands.builds();
+  const int ps_builds = bands.builds() + fine_bands.builds();
+  const std::string fine_detail =
+      fine_factor > 1 ? " (" + std::to_string(fine_bands.builds()) + " of them on the " + std::to_string(fine_factor) + "x finer " +
+                  std::to_string(fine_calibration.grid.width) + "x" + std::to_string(fine_calibration.grid.height) +
+                  " grid, for --ps-supersample)"
+            : "";
   report->steps.push_back({"rectify " + side, true,
                            std::to_string(frames.size()) + " observations on a " + std::to_string(grid.width) + "x" +
                                std::to_string(grid.height) + " grid in " + std::to_string(plan.bands) + " bands of " +
                                std::to_string(plan.band_rows) + " rows, built " + std::to_string(ps_builds) +
-                               " times for photometric stereo",
-                           bands.build_seconds()});
-  report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(ps_options.solver) + ", tiled)", true,
-                           near ? "near point lights, height refined " + std::to_string(ps.near_iterations) +
-                                      " rounds (one sweep over the bands each" +
-                                      (near_rounds_capped ? ", at most " + std::to_string(near_round_limit) + " in bands)" : ")")
-                                : "distant lights",
+                               " times for photometric stereo" + fine_detail,
+                           bands.build_seconds() + fine_bands.build_seconds()});
+  const std::string solve_name = "photometric stereo (" + reconstruction::PsSolverName(ps_options.solver) + ", tiled" +
+                                 (fine_factor > 1 ? ", " + std::to_string(fine_factor) + "x finer grid)" : ")");
+  report->steps.push_back({solve_name, true,
+                           (near ? "near point lights, height refined " + std::to_string(ps.near_iterations) +
+                                       " rounds (one sweep over the bands each" +
+                                       (near_rounds_capped ? ", at most " + std::to_string(near_round_limit) + " in bands)" : ")")
+                                 : std::string("distant lights")) +
+                               (fine_factor > 1 ? "; each band solved on the finer grid, its unit normals averaged onto the maps' grid"
+                                      : ""),
                            solve_seconds});
   if (!near) {
     report->steps.push_back({"near-light refinement", false,
@@ -309,7 +355,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
   out.reconstruction.photometric_stereo = std::move(ps);
   // The fit's sample and every band built from here on carry the final marks.
-  if (!shadow_height.empty()) mark(shadow_height, &out.sample);
+  if (!shadow_height.empty()) mark(shadow_height, grid, &out.sample);
   // A tilted view (relief_registration.h): the solves above used the most vertical view alone, on
   // the face's plane. Their heights now place every grid pixel at its own height: the bands are
   // built again there (the tilted views registered on the relief, their hidden pixels marked), and
@@ -326,22 +372,28 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     const auto [lo, hi] = std::minmax_element(z.plane(0).begin(), z.plane(0).end());
     const double z_lo = *lo, z_hi = *hi;
     bands.PutOnRelief(std::move(z));
-    PhotometricStereoResult plane_ps = std::move(out.reconstruction.photometric_stereo);
-    Image solved_at = std::move(plane_ps.height_mm);  // empty for distant lights: the anchor plane
-    // The plane's maps are released before the sweep; only its counts and round figures are kept.
-    plane_ps.normal = plane_ps.albedo = plane_ps.confidence = plane_ps.condition_number = plane_ps.used_lights = Image();
-    out.reconstruction = SideReconstruction();
-    Stack sample;
-    PhotometricStereoResult relief_ps = solve_sweep(solved_at.empty() ? nullptr : &solved_at,
-                                                    shadow_height.empty() ? nullptr : &shadow_height, &sample,
-                                                    "photometric stereo (on the relief)");
-    relief_ps.height_mm = std::move(solved_at);
-    relief_ps.near_iterations = plane_ps.near_iterations;
-    relief_ps.diffuse_roughness = plane_ps.diffuse_roughness;
-    relief_ps.last_normal_change_deg = plane_ps.last_normal_change_deg;
-    out.reconstruction.photometric_stereo = std::move(relief_ps);
-    out.sample = std::move(sample);
-    if (!shadow_height.empty()) mark(shadow_height, &out.sample);  // the sweep marks a band after sampling it
+    if (fine_factor > 1) {
+      // The fine solves read the most vertical view on the face's plane, as the one-band path's do
+      // (that view moves by hundredths of a pixel on the relief): only the fit's sample is taken anew.
+      out.sample = sample_sweep("fit sample (on the relief)");
+    } else {
+      PhotometricStereoResult plane_ps = std::move(out.reconstruction.photometric_stereo);
+      Image solved_at = std::move(plane_ps.height_mm);  // empty for distant lights: the anchor plane
+      // The plane's maps are released before the sweep; only its counts and round figures are kept.
+      plane_ps.normal = plane_ps.albedo = plane_ps.confidence = plane_ps.condition_number = plane_ps.used_lights = Image();
+      out.reconstruction = SideReconstruction();
+      Stack sample;
+      PhotometricStereoResult relief_ps = solve_sweep(solved_at.empty() ? nullptr : &solved_at,
+                                                      shadow_height.empty() ? nullptr : &shadow_height, &sample,
+                                                      "photometric stereo (on the relief)");
+      relief_ps.height_mm = std::move(solved_at);
+      relief_ps.near_iterations = plane_ps.near_iterations;
+      relief_ps.diffuse_roughness = plane_ps.diffuse_roughness;
+      relief_ps.last_normal_change_deg = plane_ps.last_normal_change_deg;
+      out.reconstruction.photometric_stereo = std::move(relief_ps);
+      out.sample = std::move(sample);
+    }
+    if (!shadow_height.empty()) mark(shadow_height, grid, &out.sample);  // the sweeps mark a band after sampling it
     const int top = MostVerticalView(out.sample);
     char detail[360];
     std::snprintf(detail, sizeof detail,
@@ -360,7 +412,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // Fit: clusters on the sample, then the per-pixel step band by band.
   ReportObliqueView(out.sample, report);
   double start = StageClock();
-  const double build_before_fit = bands.build_seconds();
+  const double build_before_fit = bands.build_seconds() + fine_bands.build_seconds();
   fitting::SurfaceGeometry sample_geometry;
   SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
   SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
@@ -370,19 +422,69 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   fitting::PixelTally tally;
   for (int b = 0; b < bands.count(); ++b) {
     Stack band = bands.Build(frames, b);
-    if (!shadow_height.empty()) mark(shadow_height, &band);
+    if (!shadow_height.empty()) mark(shadow_height, grid, &band);
     const int row0 = bands.Row0(b);
     fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b)), row0, &out.fit, &tally);
     ReportProgress(progress, "fit: pixels", static_cast<double>(b + 1) / bands.count());
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
+  // --ps-supersample: the normals refined once more on the fine bands (as FitSideWithFineNormals
+  // does on one band), their unit normals averaged onto the maps and their heights integrated on
+  // the whole fine grid.
+  Image fine_height;
+  double fine_fit_seconds = 0.0;
+  if (fine_factor > 1 && options.fit.refine_pixel_normals && !out.fit.normals.empty()) {
+    const double fine_start = StageClock();
+    const MetricGrid& fine_grid = fine_calibration.grid;
+    // The whole fine grid's heights: the surface's (bilinear), the last solve's for the near
+    // lights' vectors (empty: the anchor plane) and the marks'. 4 B a fine pixel each.
+    const Image fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
+    const Image fine_solve_height = geometry.photometric_stereo.height_mm.empty()
+                                        ? Image()
+                                        : UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
+    const Image fine_marks = shadow_height.empty() ? Image() : UpsampleLinear(shadow_height, fine_factor);
+    Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
+    fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
+    for (int b = 0; b < fine_bands.count(); ++b) {
+      Stack band = fine_bands.Build(frames, b);
+      if (!fine_marks.empty()) mark(fine_marks, fine_grid, &band);
+      const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
+      // The fine photometric stereo of the last sweep, solved again on this band: kept whole, its
+      // normals and albedo would cost 24 B a fine pixel.
+      const PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(
+          band, ps_options,
+          fine_solve_height.empty()
+              ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
+              : CropRows(fine_solve_height, row0, rows));
+      fitting::FitResult band_fit = fitting::StartPixelMaps(model, band.grid);
+      fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
+                            &band_fit, &fine_tally);
+      PasteRows(band_fit.normals, row0, &fine_normals);
+      ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
+    }
+    const Image maps_normals = std::move(out.fit.normals);  // refined on the maps' grid: the long wavelengths
+    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm);
+    fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),
+                                              maps_normals, geometry.valid, fine_factor, near, options, progress);
+    fine_fit_seconds = StageClock() - fine_start;
+  }
   out.fit.times.total_s = StageClock() - start;
   // The per-pixel step refined every pixel's normal band by band into the full-size map; the whole
   // normal map is in memory already, so the height is integrated again as in the untiled path.
-  out.fitted_normals = AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress);
-  std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on every " + std::to_string(step) +
-                       "th row and column, pixels band by band (band rebuild " +
-                       std::to_string(bands.build_seconds() - build_before_fit) + " s included)";
+  out.fitted_normals = fine_height.empty()
+                           ? AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress)
+                           : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report);
+  std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on " +
+                       (step == 1 ? std::string("every pixel") : "every " + std::to_string(step) + "th row and column") +
+                       ", pixels band by band (band rebuild " +
+                       std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
+                       " s included)";
+  if (fine_fit_seconds > 0.0) {
+    char fine_detail[96];
+    std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it)", fine_factor,
+                  fine_fit_seconds);
+    detail += fine_detail;
+  }
   ReportFitStep(out.fit, std::move(detail), StageClock() - start, report);
 
   // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
@@ -396,7 +498,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   std::size_t residual_pixels = 0;
   for (int b = 0; b < bands.count(); ++b) {
     Stack band = bands.Build(residual_frames, b);
-    if (!shadow_height.empty()) mark(shadow_height, &band);
+    if (!shadow_height.empty()) mark(shadow_height, grid, &band);
     const int row0 = bands.Row0(b), rows = bands.Rows(b);
     SideReconstruction band_geometry;
     band_geometry.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);

@@ -6,22 +6,25 @@
 
 namespace u3mscan {
 
-TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes) {
+TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes, int fine_factor) {
   TilePlan plan;
+  const int k = std::max(1, fine_factor);
+  plan.fine_factor = k;
   const double pixels = static_cast<double>(grid.width) * grid.height;
   const double per_observation = 12.0 + 1.0 + (flats ? 4.0 : 0.0);
   plan.bytes_per_pixel = observations * per_observation + kWorkingBytesPerPixel;
-  plan.whole_stack_bytes = plan.bytes_per_pixel * pixels;
+  const double maps_stack_bytes = plan.bytes_per_pixel * pixels;
+  plan.whole_stack_bytes = maps_stack_bytes * k * k;
   plan.band_rows = grid.height;
   if (!(budget_bytes > 0.0) || plan.whole_stack_bytes <= budget_bytes || grid.height < 2) return plan;
-  const double row_bytes = plan.bytes_per_pixel * grid.width;
+  const double row_bytes = plan.bytes_per_pixel * grid.width * k * k;  // one row of `grid`, k rows of the fine grid
   plan.band_rows = std::clamp(static_cast<int>(budget_bytes / row_bytes), 1, grid.height);
   plan.bands = (grid.height + plan.band_rows - 1) / plan.band_rows;
   if (plan.bands == 1) return plan;
   // Even bands: the same number of rows in each (the budget is an upper bound).
   plan.band_rows = (grid.height + plan.bands - 1) / plan.bands;
   const double sample_budget = kSampleShareOfBudget * budget_bytes;
-  int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(plan.whole_stack_bytes / sample_budget))));
+  int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(maps_stack_bytes / sample_budget))));
   while (step > 1 && pixels / (static_cast<double>(step) * step) < kMinSamplePixels) --step;
   plan.sample_step = step;
   return plan;

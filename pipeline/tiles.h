@@ -31,14 +31,21 @@ struct TilePlan {
   int bands = 1;            // 1: the whole stack at once (the untiled path)
   int band_rows = 0;        // grid rows per band (the last band may have fewer)
   int sample_step = 1;      // k: the fit's clusters are fitted on every k-th row and column
-  double bytes_per_pixel = 0.0;     // of a band, per grid pixel (memory model above)
-  double whole_stack_bytes = 0.0;   // the same for the whole grid
+  double bytes_per_pixel = 0.0;     // of a band, per grid pixel (memory model above; per fine pixel with a fine factor)
+  double whole_stack_bytes = 0.0;   // the same for the whole grid (the fine grid with a fine factor)
+  int fine_factor = 1;              // the bands' stacks are on a grid this many times finer (--ps-supersample)
 };
 
 // observations: of the side's stack; flats: whether observations carry a measured irradiance.
 // sample_step is the largest k whose sample fits kSampleShareOfBudget of the budget, lowered until
 // the sample has kMinSamplePixels (1 on small grids: the sample is the whole grid).
-TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes);
+// fine_factor k > 1 (photometric stereo on RefineGrid(grid, k), pipeline/fine_grid.h): each band's
+// stack is also built k times finer, k^2 the bytes of its rows, and it is that stack that must fit
+// the budget; band_rows stay rows of `grid` (k band_rows rows of the fine grid). The sample stays
+// on `grid`, its step from the maps' stack as without the factor, but it is kept beside a band:
+// with more than one band it takes kSampleShareOfBudget of the budget even when the maps' whole
+// stack would fit.
+TilePlan PlanTiles(const MetricGrid& grid, int observations, bool flats, double budget_bytes, int fine_factor = 1);
 
 // The sample grid of step k: pixel (i, j) is grid pixel (k j + k/2, k i + k/2), so its centre lies
 // where that pixel's does (pitch k p).

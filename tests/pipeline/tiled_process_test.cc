@@ -129,6 +129,23 @@ TEST_F(TiledTest, PlanCutsEvenBandsWithinTheBudget) {
   EXPECT_LT((plan.bands - 1) * plan.band_rows, grid.height);
   EXPECT_LE(plan.whole_stack_bytes / (plan.sample_step * plan.sample_step), kSampleShareOfBudget * budget);
   EXPECT_EQ(PlanTiles(grid, 32, false, 1e12).bands, 1);
+  // --ps-supersample 3: each band's stack is 9 times its rows' on the maps' grid, and that is what
+  // must fit; the sample stays the maps' grid's.
+  constexpr int kFine = 3;
+  const TilePlan fine = PlanTiles(grid, 32, false, budget, kFine);
+  EXPECT_EQ(fine.fine_factor, kFine);
+  EXPECT_LE(fine.bytes_per_pixel * kFine * kFine * grid.width * fine.band_rows, budget);
+  EXPECT_GT(fine.bands, plan.bands);
+  EXPECT_GE(fine.bands * fine.band_rows, grid.height);
+  EXPECT_EQ(fine.sample_step, plan.sample_step);
+  EXPECT_DOUBLE_EQ(fine.whole_stack_bytes, kFine * kFine * plan.whole_stack_bytes);
+  // A maps' stack that fits in one band whose fine stack does not: bands, with a sample kept
+  // within its share of the budget beside them.
+  const double between = 2.0 * plan.whole_stack_bytes;
+  EXPECT_EQ(PlanTiles(grid, 32, false, between).bands, 1);
+  const TilePlan fine_between = PlanTiles(grid, 32, false, between, kFine);
+  EXPECT_GT(fine_between.bands, 1);
+  EXPECT_LE(plan.whole_stack_bytes / (fine_between.sample_step * fine_between.sample_step), kSampleShareOfBudget * between);
   // Sample grid: pixel i sits on grid pixel k i + k/2.
   const MetricGrid sample = SampleGrid(grid, 4);
   EXPECT_NEAR(sample.PixelCentreInWorld(3, 5).x(), grid.PixelCentreInWorld(4 * 3 + 2, 0).x(), 1e-9);
