@@ -193,7 +193,7 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   if (!c.hold_out_lights.empty()) args.insert(args.end(), {"--hold-out-lights", c.hold_out_lights});
   // A camera finer than the maps: the maps stay at the matrix's dpi (the capture's own is finer).
   if (c.camera_per_map > 1) args.insert(args.end(), {"--dpi", Fixed(kDpi, 0)});
-  if (c.ps_supersample != 1) args.insert(args.end(), {"--ps-supersample", std::to_string(c.ps_supersample)});
+  args.insert(args.end(), {"--ps-supersample", std::to_string(c.ps_supersample)});  // the case's, not the default
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);

@@ -18,7 +18,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
   struct Args {
     std::string capture, out, side = "front", solver = "robust", integrator = "dct";
     double dpi = 0.0;
-    int ps_supersample = 1;
+    int ps_supersample = 0;
     bool no_cast_shadows = false;
   };
   auto args = std::make_shared<Args>();

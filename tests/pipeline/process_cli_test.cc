@@ -249,11 +249,17 @@ TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
     c += extra;
     return c;
   };
-  ASSERT_EQ(RunShell(reconstruct("", "rec_maps_grid")), 0);
+  // The capture is at 300 dpi and the maps at 150: the default (0) takes the camera's grid, K = 2.
+  ASSERT_EQ(RunShell(reconstruct("--ps-supersample 1", "rec_maps_grid")), 0);
   ASSERT_EQ(RunShell(reconstruct("--ps-supersample 2", "rec_camera_grid")), 0);
+  ASSERT_EQ(RunShell(reconstruct("", "rec_default")), 0);
   EXPECT_EQ(RunShell(reconstruct("--ps-supersample 5", "rec_bad")), 2);
   const Image on_maps = ReadImageFile(root_ / "rec_maps_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
   const Image on_camera = ReadImageFile(root_ / "rec_camera_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  const Image by_default = ReadImageFile(root_ / "rec_default" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  ASSERT_EQ(by_default.width(), on_camera.width());
+  ASSERT_EQ(by_default.height(), on_camera.height());
+  EXPECT_EQ(by_default.data(), on_camera.data()) << "the default is not the camera's grid";
   ASSERT_EQ(on_camera.width(), on_maps.width());
   ASSERT_EQ(on_camera.height(), on_maps.height());
   int not_unit = 0, differ = 0;
