@@ -12,6 +12,8 @@
 #include <random>
 #include <vector>
 
+#include "tests/support/analytic_surface.h"
+
 namespace u3mscan::reconstruction {
 namespace {
 
@@ -36,27 +38,12 @@ constexpr int kMaxWeightedCgIterations = 80;
 // height range (peak to peak).
 constexpr double kSinusoidRelativeTolerance = 0.01;
 
-struct Surface {
-  std::function<double(double, double)> z;   // mm at (x, y) mm
-  std::function<double(double, double)> dzdx;
-  std::function<double(double, double)> dzdy;
-};
+using Surface = testing::AnalyticSurface;
 
-double PixelX(int c) { return (c + 0.5) * kPitchMm; }
-double PixelY(int r) { return -(r + 0.5) * kPitchMm; }  // rows grow with -y
+double PixelX(int c) { return testing::GridX(c, kPitchMm); }
+double PixelY(int r) { return testing::GridY(r, kPitchMm); }  // rows grow with -y
 
-Image NormalsOf(const Surface& s, int w, int h) {
-  Image n(w, h, 3, 0.0f, kPitchMm);
-  for (int r = 0; r < h; ++r)
-    for (int c = 0; c < w; ++c) {
-      const double gx = s.dzdx(PixelX(c), PixelY(r)), gy = s.dzdy(PixelX(c), PixelY(r));
-      const double len = std::sqrt(gx * gx + gy * gy + 1.0);
-      n.at(0, r, c) = static_cast<float>(-gx / len);
-      n.at(1, r, c) = static_cast<float>(-gy / len);
-      n.at(2, r, c) = static_cast<float>(1.0 / len);
-    }
-  return n;
-}
+Image NormalsOf(const Surface& s, int w, int h) { return testing::NormalsOfSurface(s, w, h, kPitchMm); }
 
 // RMS of (height - truth) after removing the mean difference, over pixels where mask > 0.
 double RmsErrorMm(const Image& height, const Surface& s, const Image& mask = Image()) {
