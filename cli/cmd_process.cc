@@ -68,6 +68,12 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                  "Closer normals on woven fabric (docs/reconstruction.md); K^2 times the stack's memory (processed in bands "
                  "on the finer grid when that exceeds --max-memory)")
       ->capture_default_str();
+  sub.add_option("--level", args->options.levelling,
+                 "The sample's low-order shape taken out of the height and normal maps: none | plane (a tilt) | "
+                 "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "
+                 "sample's real relief over its whole width, docs/process.md, Levelling)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"none", "plane", "quadratic"}));
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
                  "separately, of the RAW decode cache (docs/process.md, Large scans)")

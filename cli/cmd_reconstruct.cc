@@ -16,7 +16,7 @@ namespace {
 U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal, albedo, height and confidence maps", 40,
                          [](CLI::App& sub) {
   struct Args {
-    std::string capture, out, side = "front", solver = "robust", integrator = "dct";
+    std::string capture, out, side = "front", solver = "robust", integrator = "dct", level = "plane";
     double dpi = 0.0;
     int ps_supersample = 0;
     bool no_cast_shadows = false;
@@ -40,6 +40,11 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
       ->check(CLI::Range(0, kMaxPsSupersample));
   sub.add_flag("--no-cast-shadows", args->no_cast_shadows,
                "Do not mark cast shadows from the heights (they stay dark or outlier data for the solver)");
+  sub.add_option("--level", args->level,
+                 "The sample's low-order shape taken out of the height and normal maps written: none | plane | quadratic "
+                 "(as `process --level`, docs/process.md, Levelling)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"none", "plane", "quadratic"}));
   sub.footer(
       "Writes DIR/maps/normal.exr (float, unit, world frame: x right, y up, z toward the camera),\n"
       "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).");
@@ -61,8 +66,10 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
                                       static_cast<int>(stack.observations.size()), flats, kDefaultStackBudgetGiB * 1024.0 * 1024.0 * 1024.0,
                                       &lowered);
     if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid", false, lowered, 0.0});
-    const SideReconstruction result =
+    SideReconstruction result =
         ReconstructSideSupersampled(prepared, args->side, k, &stack, stages, Image(), &report, bar.Callback());
+    report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(args->level), args->side, result.valid,
+                                         &result.height_mm, &result.photometric_stereo.normal));
     bar.Finish();
     const auto& ps = result.photometric_stereo;
     WriteStageOutputs(args->out,

@@ -103,6 +103,7 @@ nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptio
                           {"solver", options.solver.empty() ? "preset" : options.solver},
                           {"integrator", options.integrator.empty() ? "preset" : options.integrator},
                           {"fit_mode", options.fit_mode.empty() ? "preset" : options.fit_mode},
+                          {"levelling", options.levelling},
                           {"dpi", prepared.calibration.grid.dpi()},
                           {"surface_z_mm", prepared.calibration.surface_z_mm}};
   nlohmann::json cameras = nlohmann::json::array();
@@ -165,6 +166,9 @@ bool ProcessOptions::Check(std::string* why) const {
     return fail("--ps-supersample must be 0 (as fine as the camera resolves), 1, 2 or 3");
   }
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
+  if (levelling != "none" && levelling != "plane" && levelling != "quadratic") {
+    return fail("--level must be none, plane or quadratic");
+  }
   if (!fit_mode.empty() && fit_mode != "clusters" && fit_mode != "per-pixel") return fail("--fit-mode must be clusters or per-pixel");
   for (std::size_t i = 0; i < hold_out_lights.size(); ++i) {
     if (hold_out_lights[i].empty()) return fail("--hold-out-lights must list light ids such as L03,L09");
@@ -223,6 +227,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"integrator", reconstruction::IntegratorName(stages.integration.method)},
                     {"max_memory_gib", options.max_memory_gib},
                     {"ps_supersample", options.ps_supersample},
+                    {"levelling", options.levelling},
                     {"hold_out_lights", options.hold_out_lights}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 
@@ -359,6 +364,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
+    report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(options.levelling), side, reconstruction.valid.empty() ? alpha : reconstruction.valid,
+                                         &maps.height_mm, &maps.normal));
     maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       maps.scalars.push_back(ChoiceFromDecision(kU3mKeyOfFitParameter[p], fit.maps[p], fit.parameter_maps[p], grid.pitch_mm,
@@ -413,7 +420,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     if (options.debug_maps) {
       DebugMaps d;
       d.prefix = side == "front" ? "" : side + "_";
-      d.normal = ps.normal;
+      d.normal = maps.normal;  // levelled, as written
       d.albedo = ps.albedo;
       d.height = maps.height_mm;
       d.confidence = ps.confidence;

@@ -44,6 +44,12 @@ struct ProcessOptions {
   // the top camera resolves (up to 3: the default; 1 when the maps are at the camera's dpi). A side whose fine stack does not fit one band is processed
   // in bands on the finer grid (tiled_side.h).
   int ps_supersample = 0;
+  // The sample's low-order shape taken out of the written height and normal maps
+  // (reconstruction/relief_levelling.h): none | plane | quadratic. A plane is never part of a
+  // material that tiles; a quadratic also removes the bowl that view-dependent lobes leave in the
+  // normals of glossy weaves, and with it a sample's real large-scale relief (velvet's crushed
+  // regions): docs/process.md, "Levelling".
+  std::string levelling = "plane";
   // Returns false and says why when an option is out of range.
   bool Check(std::string* why) const;
 };

@@ -183,6 +183,19 @@ StepRecord CastShadowStep(const StageOptions& options, double share, bool near, 
   return {"cast shadows", true, detail, seconds};
 }
 
+StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string& side, const Image& valid, Image* height_mm,
+                         Image* normal) {
+  const std::string name = "level " + side;
+  if (levelling == reconstruction::Levelling::kNone) return {name, false, "--level none: the sample's shape is kept", 0.0};
+  const double start = StageClock();
+  const reconstruction::LevellingResult removed = reconstruction::LevelRelief(levelling, height_mm, normal, valid);
+  if (removed.weighted_pixels <= 0.0) return {name, false, "too few valid pixels to fit a " + reconstruction::LevellingName(levelling), 0.0};
+  char detail[200];
+  std::snprintf(detail, sizeof detail, "%s removed: %.1f um peak to valley, tilt up to %.3f deg",
+                reconstruction::LevellingName(levelling).c_str(), 1000.0 * removed.peak_to_valley_mm, removed.max_tilt_deg);
+  return {name, true, detail, StageClock() - start};
+}
+
 SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress) {
   SideReconstruction out;

@@ -19,6 +19,7 @@
 #include "pipeline/presets.h"
 #include "pipeline/run_report.h"
 #include "reconstruction/photometric_stereo.h"
+#include "reconstruction/relief_levelling.h"
 
 namespace u3mscan {
 
@@ -85,6 +86,12 @@ StepRecord CastShadowStep(const StageOptions& options, double share, bool near, 
 // not two: 12 bytes a pixel); returns true when they were adopted.
 bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
                         SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
+
+// The "level" step of a side: its written height and normal maps levelled
+// (reconstruction::LevelRelief), weighted by `valid` (1 where the surface is data; empty = every
+// pixel). The step says what was removed: the surface's peak to valley (um) and largest tilt.
+StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string& side, const Image& valid, Image* height_mm,
+                         Image* normal);
 
 // Relative re-rendering residual per pixel, sum_c |render - data| / (0.5 sum_c (render + data)),
 // averaged over up to `max_observations` observations spread over the stack (1 channel, in [0, 2];

@@ -19,6 +19,7 @@
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "tests/support/bump_scene.h"
+#include "reconstruction/relief_levelling.h"
 #include "u3m/image_io.h"
 #include "u3m/validate.h"
 
@@ -276,6 +277,64 @@ TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
   }
   EXPECT_EQ(not_unit, 0);
   EXPECT_GT(differ, 0) << "the camera's grid gave the maps' grid normals";
+}
+
+// --level: a value out of the list is refused before anything is written; the default levels a
+// plane out of the written height (the step says so), and `none` keeps the shape: the plane run's
+// height is the none run's with its plane removed, and its normals the none run's turned by that
+// tilt (reconstruction/relief_levelling.h; the kernel's own tests are ReliefLevelling.*).
+TEST_F(ProcessCli, LevelIsCheckedAndTakesTheTiltOut) {
+  // Heights written as float EXR from the same run but for the levelling: float32 round-off of
+  // heights below a millimetre and of unit normals.
+  constexpr double kSameRunToleranceMm = 1e-6;
+  constexpr float kSameRunNormalTolerance = 1e-5f;
+  EXPECT_EQ(RunShell(FastProcessOfA("--level cubic", "level_bad")), 2);
+  EXPECT_FALSE(fs::exists(root_ / "level_bad"));
+  ASSERT_EQ(RunShell(FastProcessOfA("--debug-maps", "level_plane")), 0);
+  ASSERT_EQ(RunShell(FastProcessOfA("--debug-maps --level none", "level_none")), 0);
+
+  auto report_of = [&](const std::string& out) {
+    std::ifstream in(root_ / out / "report.json");
+    return nlohmann::json::parse(in);
+  };
+  auto step = [&](const std::string& out) {
+    const nlohmann::json report = report_of(out);
+    for (const auto& s : report["steps"]) {
+      if (s["name"] == "level front") return s;
+    }
+    return nlohmann::json();
+  };
+  const nlohmann::json plane_step = step("level_plane"), none_step = step("level_none");
+  // The maps' pitch (the EXR files do not carry it): the slopes the normals turn by depend on it.
+  const double pitch_mm = report_of("level_none")["calibration"]["grid"]["pitch_mm"].get<double>();
+  ASSERT_FALSE(plane_step.is_null());
+  EXPECT_TRUE(plane_step["ran"].get<bool>());
+  EXPECT_NE(plane_step["reason"].get<std::string>().find("plane removed"), std::string::npos) << plane_step.dump();
+  ASSERT_FALSE(none_step.is_null());
+  EXPECT_FALSE(none_step["ran"].get<bool>());
+
+  Image none_height = ReadImageFile(root_ / "level_none" / "maps" / "height.exr", PixelEncoding::kLinear);
+  Image none_normal = ReadImageFile(root_ / "level_none" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  const Image plane_height = ReadImageFile(root_ / "level_plane" / "maps" / "height.exr", PixelEncoding::kLinear);
+  const Image plane_normal = ReadImageFile(root_ / "level_plane" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  ASSERT_EQ(none_height.width(), plane_height.width());
+  ASSERT_EQ(none_height.height(), plane_height.height());
+  none_height.set_pitch_mm(pitch_mm);
+  const reconstruction::LevellingResult tilt = reconstruction::LevelRelief(reconstruction::Levelling::kPlane, &none_height, &none_normal);
+  ASSERT_GT(tilt.weighted_pixels, 0.0);
+  EXPECT_GT(tilt.peak_to_valley_mm, 0.0) << "the capture's height has some tilt to take out";
+  double worst_mm = 0.0;
+  float worst_normal = 0.0f;
+  for (int r = 0; r < none_height.height(); ++r) {
+    for (int c = 0; c < none_height.width(); ++c) {
+      worst_mm = std::max(worst_mm, std::abs(static_cast<double>(none_height.at(0, r, c)) - plane_height.at(0, r, c)));
+      for (int ch = 0; ch < 3; ++ch) {
+        worst_normal = std::max(worst_normal, std::abs(none_normal.at(ch, r, c) - plane_normal.at(ch, r, c)));
+      }
+    }
+  }
+  EXPECT_LT(worst_mm, kSameRunToleranceMm);
+  EXPECT_LT(worst_normal, kSameRunNormalTolerance);
 }
 
 }  // namespace
