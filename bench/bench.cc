@@ -194,6 +194,7 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   // A camera finer than the maps: the maps stay at the matrix's dpi (the capture's own is finer).
   if (c.camera_per_map > 1) args.insert(args.end(), {"--dpi", Fixed(kDpi, 0)});
   args.insert(args.end(), {"--ps-supersample", std::to_string(c.ps_supersample)});  // the case's, not the default
+  args.insert(args.end(), {"--level", c.level});
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);
@@ -280,6 +281,7 @@ std::string BenchCase::RunId() const {
   if (!integrator.empty()) id += "_int-" + integrator;
   if (!fit_mode.empty()) id += "_fit-" + fit_mode;
   if (ps_supersample != 1) id += "_pss" + std::to_string(ps_supersample);
+  if (level != "plane") id += "_level-" + level;
   if (!hold_out_lights.empty()) {
     std::string ids = hold_out_lights;
     std::replace(ids.begin(), ids.end(), ',', '-');
@@ -350,12 +352,18 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
   // processed at the matrix's dpi, against the matrix run at 1x (docs/calibration.md, "Footprint
   // pre-filter").
   // Each also with photometric stereo on the camera's grid (--ps-supersample 0).
+  // Plain also with --level quadratic on the camera's grid: the bowl that the view-dependent lobes
+  // leave in a glossy weave's heights (docs/process.md, "Levelling").
   auto finer = [&](const std::string& scene, const std::string& preset, int factor) {
     BenchCase c{scene, "distant", base, 0, true, preset, "", "", "camera-finer", "", ""};
     c.camera_per_map = factor;
     add(c);
     c.ps_supersample = 0;
     add(c);
+    if (scene == "plain") {
+      c.level = "quadratic";
+      add(c);
+    }
   };
   if (quick) {
     finer("plain", "fast", 2);
@@ -384,7 +392,7 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
 }
 
 std::vector<std::string> BenchCsvColumns() {
-  return {"group", "scene", "rig", "size_px", "camera_per_map", "ps_supersample", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
+  return {"group", "scene", "rig", "size_px", "camera_per_map", "ps_supersample", "level", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
           "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
@@ -401,7 +409,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     auto v = [&](double x, int d) { return ok ? Fixed(x, d) : std::string(); };
     std::vector<std::string> cells = {
         r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), std::to_string(r.c.camera_per_map),
-        std::to_string(r.c.ps_supersample), v(r.megapixels, 4), std::to_string(r.lights_used),
+        std::to_string(r.c.ps_supersample), r.c.level, v(r.megapixels, 4), std::to_string(r.lights_used),
         r.c.calibration_frames ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.fit_mode_used, r.status,
         Fixed(r.wall_s, 3), v(r.total_s, 3), Fixed(r.peak_rss_mib, 1), v(r.stages.read, 3), v(r.stages.calibration, 3),
         v(r.stages.rectify, 3), v(r.stages.alpha, 3), v(r.stages.photometric_stereo, 3), v(r.stages.integration, 3),
@@ -523,8 +531,8 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
 
   // Camera finer than the maps, against the 1x matrix run of the same scene and preset.
   s << "\n## Camera finer than the maps (footprint pre-filter)\n\n| capture | camera px per map px | photometric stereo grid | "
-       "preset | total s | normal mean / p95 deg | albedo dE | height % | re-render % | at 1x: normal mean / p95 deg | height % | "
-       "re-render % |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+       "level | preset | total s | normal mean / p95 deg | albedo dE | height % | re-render % | at 1x: normal mean / p95 deg | height % | "
+       "re-render % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "camera-finer" || r.status != "ok") continue;
     BenchCase one = r.c;
@@ -532,7 +540,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     const BenchRow* at_1x = find(one.CaptureId(), r.c.preset);
     const Evaluation& e = r.evaluation;
     s << "| " << r.c.CaptureId() << " | " << r.c.camera_per_map << " | "
-      << (r.c.ps_supersample == 1 ? "maps'" : "camera's (--ps-supersample 0)") << " | " << r.c.preset << " | "
+      << (r.c.ps_supersample == 1 ? "maps'" : "camera's (--ps-supersample 0)") << " | " << r.c.level << " | " << r.c.preset << " | "
       << Fixed(r.total_s, 2) << " | "
       << Fixed(e.normal_mean_deg, 2) << " / " << Fixed(e.normal_p95_deg, 2) << " | " << Fixed(e.albedo_de_mean, 2) << " | "
       << Fixed(e.height_rmse_percent, 1) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " | ";

@@ -44,6 +44,9 @@ struct BenchCase {
   // u3mscan process --ps-supersample: 1 = photometric stereo on the maps' grid, 0 = as fine as
   // the camera resolves (pipeline/supersampled_reconstruction.h); group "camera-finer".
   int ps_supersample = 1;
+  // u3mscan process --level: none | plane (the default) | quadratic (docs/process.md, "Levelling");
+  // group "camera-finer" runs plain with quadratic too.
+  std::string level = "plane";
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };

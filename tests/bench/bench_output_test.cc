@@ -156,14 +156,16 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   const auto cases = BenchMatrix(options);
   std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
-  int held_out = 0, camera_finer = 0, camera_grid_ps = 0;
+  int held_out = 0, camera_finer = 0, camera_grid_ps = 0, quadratic = 0;
   for (const auto& c : cases) {
     held_out += !c.hold_out_lights.empty() && c.group == "held-out";
     camera_finer += c.group == "camera-finer" && c.camera_per_map == 2;
     camera_grid_ps += c.group == "camera-finer" && c.ps_supersample == 0;
+    quadratic += c.group == "camera-finer" && c.ps_supersample == 0 && c.level == "quadratic";
     if (c.group != "camera-finer") {
       EXPECT_EQ(c.camera_per_map, 1) << c.RunId();
       EXPECT_EQ(c.ps_supersample, 1) << c.RunId();
+      EXPECT_EQ(c.level, "plane") << c.RunId();
     }
     presets.insert(c.preset);
     rigs.insert(c.rig);
@@ -180,8 +182,10 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   EXPECT_EQ(fit_modes, std::set<std::string>{"clusters"}) << "clusters against the balanced run's per-pixel fit";
   EXPECT_TRUE(without_calibration);
   EXPECT_EQ(held_out, 1) << "one run with lights held out of the fit";
-  EXPECT_EQ(camera_finer, 2) << "a camera at twice the maps' dpi, photometric stereo on the maps' grid and on the camera's";
-  EXPECT_EQ(camera_grid_ps, 1) << "one run with --ps-supersample 0";
+  EXPECT_EQ(camera_finer, 3)
+      << "a camera at twice the maps' dpi, photometric stereo on the maps' grid and on the camera's (levelled both ways)";
+  EXPECT_EQ(camera_grid_ps, 2) << "two runs with --ps-supersample 0";
+  EXPECT_EQ(quadratic, 1) << "one of them with --level quadratic";
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());
 }

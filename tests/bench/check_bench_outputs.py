@@ -10,7 +10,7 @@ import xml.dom.minidom
 from pathlib import Path
 
 EXPECTED_COLUMNS = [
-    "group", "scene", "rig", "size_px", "camera_per_map", "ps_supersample", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
+    "group", "scene", "rig", "size_px", "camera_per_map", "ps_supersample", "level", "megapixels", "lights", "calibration_frames", "preset", "solver", "integrator",
     "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
@@ -63,8 +63,11 @@ def main():
         fail(f"camera-finer run missing or its camera_per_map below 2: {finer}")
     if any(r["camera_per_map"] != "1" for r in records if r["group"] != "camera-finer"):
         fail("camera_per_map other than 1 outside the camera-finer group")
-    if sorted(r["ps_supersample"] for r in finer) != ["0", "1"]:
-        fail(f"camera-finer runs should have photometric stereo on the maps' grid (1) and the camera's (0): {finer}")
+    if sorted((r["ps_supersample"], r["level"]) for r in finer) != [("0", "plane"), ("0", "quadratic"), ("1", "plane")]:
+        fail(f"camera-finer runs should have photometric stereo on the maps' grid (1) and the camera's (0), "
+             f"the latter also with --level quadratic: {finer}")
+    if any(r["level"] != "plane" for r in records if r["group"] != "camera-finer"):
+        fail("level other than plane outside the camera-finer group")
     if any(r["ps_supersample"] != "1" for r in records if r["group"] != "camera-finer"):
         fail("ps_supersample other than 1 outside the camera-finer group")
     at_1x = {(r["scene"], r["rig"], r["preset"]): r for r in records if r["group"] == "matrix"}
