@@ -364,7 +364,9 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
-    report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(options.levelling), side, reconstruction.valid.empty() ? alpha : reconstruction.valid,
+    // The sample's tilt (or bowl) out of the written maps; every stage above used the heights as integrated.
+    const Image& level_weight = reconstruction.valid.empty() ? alpha : reconstruction.valid;
+    report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(options.levelling), side, level_weight,
                                          &maps.height_mm, &maps.normal));
     maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
