@@ -163,16 +163,21 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   const int k = fine.k;
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
                                          geometry.height_mm};
-  // FitPrincipled's stages (tiled_fit.h), then the per-pixel step once more on the fine grid.
-  const fitting::ClusterModel model = fitting::FitClusterModel(stack, surface, options.fit, progress);
+  const fitting::SurfaceGeometry fine_surface{fine.side.photometric_stereo.normal, fine.side.photometric_stereo.albedo,
+                                              fine.side.height_mm};
+  // FitPrincipled's stages (tiled_fit.h): the clusters on the fine grid (its stack holds the maps'
+  // observations in the same order, so the model serves both grids), then the per-pixel step on the
+  // maps' grid for the written maps and once more on the fine grid for the normals.
+  const bool clusters_on_fine_grid = options.fit_clusters_on_fine_grid;
+  const fitting::ClusterModel model = clusters_on_fine_grid
+                                          ? fitting::FitClusterModel(fine.stack, fine_surface, options.fit, progress)
+                                          : fitting::FitClusterModel(stack, surface, options.fit, progress);
   fitting::FitResult fit = fitting::StartPixelMaps(model, stack.grid);
   fitting::PixelTally tally;
   fitting::FitPixelRows(model, stack, surface, 0, &fit, &tally, progress);
   fitting::FinishPixelMaps(model, tally, &fit);
   const double fine_start = StageClock();
   {
-    const fitting::SurfaceGeometry fine_surface{fine.side.photometric_stereo.normal, fine.side.photometric_stereo.albedo,
-                                                fine.side.height_mm};
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
     fitting::PixelTally fine_tally;
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
@@ -191,8 +196,9 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   char seconds[64];
   std::snprintf(seconds, sizeof seconds, " (%.2f s of it)", fine_seconds);
   ReportFitStep(fit,
-                std::to_string(fit.clusters.size()) + " clusters; normals refined on the " + std::to_string(k) +
-                    "x finer grid" + seconds,
+                std::to_string(fit.clusters.size()) + " clusters fitted on the " +
+                    (clusters_on_fine_grid ? std::to_string(k) + "x finer grid" : std::string("maps' grid")) +
+                    "; normals refined on the " + std::to_string(k) + "x finer grid" + seconds,
                 StageClock() - start, report);
   return fit;
 }

@@ -11,7 +11,8 @@
 // the grid: least squares on a Lambertian grey weave 0.06 deg, with the weave's colours 1.37 deg,
 // with its lobes 1.65 deg (docs/reconstruction.md, "Photometric stereo at the camera's resolution").
 //
-// The fit still runs on the maps' grid (its stack, `stack` below), with these normals.
+// The fit's clusters run on the fine grid too (FitSideWithFineNormals), its written maps on the
+// maps' grid (its stack, `stack` below), with these normals.
 
 #include <string>
 
@@ -69,8 +70,12 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
                                                RunReport* report, const ProgressCallback& progress = {},
                                                FineReconstruction* keep_fine = nullptr);
 
-// FitSide, and with `fine` (k > 1) and options.fit.refine_pixel_normals the fitted normals are
-// refined on the fine grid instead: each fine pixel with its nearest cluster's parameters
+// FitSide, and with `fine` (k > 1) and options.fit.refine_pixel_normals: the clusters fitted on
+// the fine stack and normals (options.fit_clusters_on_fine_grid; there a pixel holds fewer yarn
+// facets, and the one-normal-per-pixel model reads a woven fabric's specular lobe less weak:
+// plain at 3x, specular 0.25 -> 0.37 for 0.5, velvet's re-render 3.6 -> 2.4 %; docs/fitting.md,
+// "Clusters on the finer grid"), the per-pixel step on the maps' grid, and the fitted normals
+// refined on the fine grid: each fine pixel with its nearest cluster's parameters
 // (fitting/tiled_fit.h FitPixelRows on the fine stack), their unit normals averaged onto the
 // maps' grid. Refined on the maps' grid they would lean back to the albedo-weighted normal of the
 // whole pixel (plain at 3x: 1.34 deg from photometric stereo at 3x, 1.94 after a refinement on the

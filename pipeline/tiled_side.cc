@@ -474,7 +474,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.fitted_normals = fine_height.empty()
                            ? AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress)
                            : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report);
+  // In bands the clusters are fitted on the maps' grid sample even with a finer grid: the fine
+  // stack is never whole (one band's fine stack holds only its rows), so a fine sample would need a
+  // sweep of its own (not done; docs/fitting.md, "Clusters on the finer grid").
   std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on " +
+                       (fine_factor > 1 ? std::string("the maps' grid, ") : std::string()) +
                        (step == 1 ? std::string("every pixel") : "every " + std::to_string(step) + "th row and column") +
                        ", pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
