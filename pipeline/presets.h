@@ -35,9 +35,9 @@ struct StageOptions {
   bool mark_cast_shadows = true;
   reconstruction::CastShadowOptions cast_shadows;
   fitting::FitOptions fit;
-  // With photometric stereo on a finer grid (--ps-supersample) in one band: the fit's clusters
-  // (gather, k-means, Ceres fits, observability) on the fine stack and its normals, where a pixel
-  // holds fewer yarn facets, instead of on the maps' (pipeline/supersampled_reconstruction.h).
+  // With photometric stereo on a finer grid (--ps-supersample): the fit's clusters (gather,
+  // k-means, Ceres fits, observability) on the fine stack (bands: a sample of it) and its normals,
+  // where a pixel holds fewer yarn facets, instead of on the maps' (pipeline/supersampled_reconstruction.h).
   // Off only for comparisons (`process --fit-on-maps-grid`).
   bool fit_clusters_on_fine_grid = true;
 };

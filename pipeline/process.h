@@ -32,7 +32,7 @@ struct ProcessOptions {
   std::string integrator;               // dct | robust
   std::string fit_mode;                 // clusters | per-pixel (fitting::FitMode)
   bool no_cast_shadows = false;         // do not mark cast shadows (on in every preset; for comparisons)
-  // With --ps-supersample in one band, fit the clusters on the maps' grid instead of the finer one
+  // With --ps-supersample, fit the clusters on the maps' grid instead of the finer one
   // (StageOptions::fit_clusters_on_fine_grid; for comparisons).
   bool fit_on_maps_grid = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their

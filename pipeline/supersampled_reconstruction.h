@@ -74,8 +74,8 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 // the fine stack and normals (options.fit_clusters_on_fine_grid; there a pixel holds fewer yarn
 // facets, and the one-normal-per-pixel model reads a woven fabric's specular lobe less weak:
 // plain at 3x, specular 0.25 -> 0.37 for 0.5, velvet's re-render 3.6 -> 2.4 %; docs/fitting.md,
-// "Clusters on the finer grid"), the per-pixel step on the maps' grid, and the fitted normals
-// refined on the fine grid: each fine pixel with its nearest cluster's parameters
+// "Clusters on the finer grid"; tiled_side.cc does the same on a sample of the fine bands), the
+// per-pixel step on the maps' grid, and the fitted normals refined on the fine grid: each fine pixel with its nearest cluster's parameters
 // (fitting/tiled_fit.h FitPixelRows on the fine stack), their unit normals averaged onto the
 // maps' grid. Refined on the maps' grid they would lean back to the albedo-weighted normal of the
 // whole pixel (plain at 3x: 1.34 deg from photometric stereo at 3x, 1.94 after a refinement on the

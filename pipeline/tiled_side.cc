@@ -413,10 +413,58 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   ReportObliqueView(out.sample, report);
   double start = StageClock();
   const double build_before_fit = bands.build_seconds() + fine_bands.build_seconds();
+  // --ps-supersample: a fine band solved again as the last sweep solved it (kept whole, its normals
+  // and albedo would cost 24 B a fine pixel), its heights from the whole fine grid's: the surface's
+  // (bilinear), the last solve's for the near lights' vectors (empty: the anchor plane) and the
+  // marks'. 4 B a fine pixel each, made when a fine pass below needs them.
+  const bool fine_fit = fine_factor > 1 && options.fit.refine_pixel_normals;
+  const MetricGrid& fine_grid = fine_calibration.grid;
+  Image fine_surface_height, fine_solve_height, fine_marks;
+  if (fine_fit) {
+    fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
+    if (!geometry.photometric_stereo.height_mm.empty()) {
+      fine_solve_height = UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
+    }
+    if (!shadow_height.empty()) fine_marks = UpsampleLinear(shadow_height, fine_factor);
+  }
+  auto solve_fine_band = [&](int b, Stack* band) {
+    *band = fine_bands.Build(frames, b);
+    if (!fine_marks.empty()) mark(fine_marks, fine_grid, band);
+    const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
+    return reconstruction::SolvePhotometricStereoAt(
+        *band, ps_options,
+        fine_solve_height.empty()
+            ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
+            : CropRows(fine_solve_height, row0, rows));
+  };
+  // The clusters on the finer grid (StageOptions::fit_clusters_on_fine_grid), as one band fits them
+  // on its whole fine stack (supersampled_reconstruction.h): the sample is then one fine pixel in
+  // each block of step x step map pixels (as many as the maps' sample), gathered in one more sweep
+  // of the fine bands. Not for a tilted view: its fine solves read the top view on the face's
+  // plane, and one band fits that case on the maps' grid too.
+  const bool clusters_on_fine_grid = fine_fit && options.fit_clusters_on_fine_grid && !NeedsReliefRegistration(out.sample);
   fitting::SurfaceGeometry sample_geometry;
-  SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
-  SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
-  SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);
+  if (clusters_on_fine_grid) {
+    const int fine_step = step * fine_factor;
+    const MetricGrid fine_sample_grid = SampleGrid(fine_grid, fine_step);
+    Stack fine_sample;
+    for (int b = 0; b < fine_bands.count(); ++b) {
+      Stack band;
+      const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
+      const int row0 = fine_bands.Row0(b);
+      AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
+      SampleRows(band_ps.normal, row0, fine_step, fine_sample_grid, &sample_geometry.normals);
+      SampleRows(band_ps.albedo, row0, fine_step, fine_sample_grid, &sample_geometry.albedo);
+      SampleRows(CropRows(fine_surface_height, row0, fine_bands.Rows(b)), row0, fine_step, fine_sample_grid,
+                 &sample_geometry.height_mm);
+      ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
+    }
+    out.sample = std::move(fine_sample);
+  } else {
+    SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
+    SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
+    SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);
+  }
   const fitting::ClusterModel model = fitting::FitClusterModel(out.sample, sample_geometry, options.fit, progress);
   out.fit = fitting::StartPixelMaps(model, grid);
   fitting::PixelTally tally;
@@ -433,29 +481,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // the whole fine grid.
   Image fine_height;
   double fine_fit_seconds = 0.0;
-  if (fine_factor > 1 && options.fit.refine_pixel_normals && !out.fit.normals.empty()) {
+  if (fine_fit && !out.fit.normals.empty()) {
     const double fine_start = StageClock();
-    const MetricGrid& fine_grid = fine_calibration.grid;
-    // The whole fine grid's heights: the surface's (bilinear), the last solve's for the near
-    // lights' vectors (empty: the anchor plane) and the marks'. 4 B a fine pixel each.
-    const Image fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
-    const Image fine_solve_height = geometry.photometric_stereo.height_mm.empty()
-                                        ? Image()
-                                        : UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
-    const Image fine_marks = shadow_height.empty() ? Image() : UpsampleLinear(shadow_height, fine_factor);
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
     for (int b = 0; b < fine_bands.count(); ++b) {
-      Stack band = fine_bands.Build(frames, b);
-      if (!fine_marks.empty()) mark(fine_marks, fine_grid, &band);
+      Stack band;
+      const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
       const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
-      // The fine photometric stereo of the last sweep, solved again on this band: kept whole, its
-      // normals and albedo would cost 24 B a fine pixel.
-      const PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(
-          band, ps_options,
-          fine_solve_height.empty()
-              ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
-              : CropRows(fine_solve_height, row0, rows));
       fitting::FitResult band_fit = fitting::StartPixelMaps(model, band.grid);
       fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
                             &band_fit, &fine_tally);
@@ -474,12 +507,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.fitted_normals = fine_height.empty()
                            ? AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress)
                            : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report);
-  // In bands the clusters are fitted on the maps' grid sample even with a finer grid: the fine
-  // stack is never whole (one band's fine stack holds only its rows), so a fine sample would need a
-  // sweep of its own (not done; docs/fitting.md, "Clusters on the finer grid").
   std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on " +
-                       (fine_factor > 1 ? std::string("the maps' grid, ") : std::string()) +
-                       (step == 1 ? std::string("every pixel") : "every " + std::to_string(step) + "th row and column") +
+                       (clusters_on_fine_grid ? "the " + std::to_string(fine_factor) + "x finer grid, one pixel in "
+                                              : std::string(fine_factor > 1 ? "the maps' grid, " : "")) +
+                       (clusters_on_fine_grid ? std::to_string(step * fine_factor) + " x " + std::to_string(step * fine_factor)
+                        : step == 1           ? std::string("every pixel")
+                                              : "every " + std::to_string(step) + "th row and column") +
                        ", pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
                        " s included)";
