@@ -507,12 +507,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.fitted_normals = fine_height.empty()
                            ? AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress)
                            : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report);
-  std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on " +
-                       (clusters_on_fine_grid ? "the " + std::to_string(fine_factor) + "x finer grid, one pixel in "
-                                              : std::string(fine_factor > 1 ? "the maps' grid, " : "")) +
-                       (clusters_on_fine_grid ? std::to_string(step * fine_factor) + " x " + std::to_string(step * fine_factor)
-                        : step == 1           ? std::string("every pixel")
-                                              : "every " + std::to_string(step) + "th row and column") +
+  std::string sampled;  // where the clusters' sample came from
+  if (clusters_on_fine_grid) {
+    const std::string block = std::to_string(step * fine_factor);
+    sampled = "the " + std::to_string(fine_factor) + "x finer grid, one pixel in " + block + " x " + block;
+  } else {
+    if (fine_factor > 1) sampled = "the maps' grid, ";
+    sampled += step == 1 ? std::string("every pixel") : "every " + std::to_string(step) + "th row and column";
+  }
+  std::string detail = std::to_string(out.fit.clusters.size()) + " clusters fitted on " + sampled +
                        ", pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
                        " s included)";

@@ -139,18 +139,13 @@ LevellingResult LevelRelief(Levelling levelling, Image* height_mm, Image* normal
   if (eigen.info() != Eigen::Success || !(lambda.minCoeff() > kMinEigenvalueRatio * lambda.maxCoeff())) return result;
   const Eigen::VectorXd c = a.ldlt().solve(b);
   if (!c.allFinite()) return result;
-  for (int i = 1; i < terms; ++i) result.coefficients_mm[static_cast<std::size_t>(i)] = c(i);
-  result.coefficients_mm[0] = c(0);
+  for (int i = 0; i < terms; ++i) result.coefficients_mm[static_cast<std::size_t>(i)] = c(i);
   result.weighted_pixels = total;
 
-  // Subtract the surface (its constant too, then the weighted mean height put back: the levelled
-  // map keeps the mean height it had) and rotate the normals by its slope.
-  const double mean_height = c(0) + [&] {
-    double s = 0.0;
-    for (int i = 1; i < terms; ++i) s += c(i) * ata(0, i);
-    return s / total;
-  }();
-  const double constant = c(0) - mean_height;
+  // Subtract the surface less its weighted mean, so that the levelled map keeps the mean height it
+  // had. Row 0 of the normal matrix holds the weighted sums of the basis terms.
+  const double surface_mean = ata.row(0).head(terms).dot(c) / total;
+  const double constant = c(0) - surface_mean;  // added to Evaluate's z, which leaves c(0) out
   std::vector<double> row_lo(static_cast<std::size_t>(h), std::numeric_limits<double>::infinity());
   std::vector<double> row_hi(static_cast<std::size_t>(h), -std::numeric_limits<double>::infinity());
   std::vector<double> row_tilt(static_cast<std::size_t>(h), 0.0);
