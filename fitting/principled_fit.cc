@@ -428,22 +428,41 @@ SolveOutcome SolveClusterOnce(const ClusterSamples& samples, const ParameterMask
   return outcome;
 }
 
+// Mean Cauchy cost per observation (0.5 rho(|r|^2), r in sigma, 3 channels) above which a Cauchy
+// solve is taken to have stalled: clean data give about 1.1 (|r|^2 ~ 3), this is |r| ~ 5 sigma on
+// average.
+constexpr double kCauchyStallCostPerObservation = 4.0;
+
 // The solve with options.robust_loss. A Cauchy loss is not convex: from a start far from the data
 // every observation is an outlier, its weight vanishes and the solve stalls there (a metallic
-// thread fitted as a dielectric stopped at a relative residual of 0.91). So a Cauchy solve starts
-// from the Huber solve at the same scale, which is convex in the residuals and gets close first.
+// thread fitted as a dielectric stopped at a relative residual of 0.91). A Cauchy solve that ends
+// with a mean cost above kCauchyStallCostPerObservation is therefore run again from the same start
+// through a Huber solve at the same scale (convex in the residuals, it gets close first), and the
+// lower Cauchy cost is kept. Running the Huber solve first every time cost the balanced preset 66 %
+// more time for the same maps (plain at 3x: 20 -> 34 s); the check costs nothing on data the model
+// explains.
 SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& free, const FitOptions& options,
                           ParameterVector& params) {
   if (options.robust_loss.kind != RobustLossKind::kCauchy) return SolveClusterOnce(samples, free, options, params);
+  const ParameterVector start = params;
+  SolveOutcome outcome = SolveClusterOnce(samples, free, options, params);
+  const double observations = std::max<double>(1.0, static_cast<double>(samples.observations.size()));
+  if (outcome.usable && outcome.final_cost <= kCauchyStallCostPerObservation * observations) return outcome;
   FitOptions convex = options;
   convex.robust_loss.kind = RobustLossKind::kHuber;
-  const SolveOutcome first = SolveClusterOnce(samples, free, convex, params);
-  SolveOutcome outcome = SolveClusterOnce(samples, free, options, params);
-  outcome.iterations += first.iterations;
-  if (!outcome.usable && first.usable) {
-    outcome.usable = true;  // params hold the Huber solve
-    outcome.message = "Cauchy solve failed (" + outcome.message + "); kept the Huber solve";
+  ParameterVector again = start;
+  const SolveOutcome first = SolveClusterOnce(samples, free, convex, again);
+  SolveOutcome second = SolveClusterOnce(samples, free, options, again);
+  second.iterations += first.iterations + outcome.iterations;
+  if (!second.usable && first.usable) {
+    second.usable = true;  // `again` holds the Huber solve
+    second.message = "Cauchy solve failed (" + second.message + "); kept the Huber solve";
   }
+  if (second.usable && (!outcome.usable || second.final_cost < outcome.final_cost)) {
+    params = again;
+    return second;
+  }
+  outcome.iterations = second.iterations;
   return outcome;
 }
 
