@@ -70,21 +70,21 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
                                                RunReport* report, const ProgressCallback& progress = {},
                                                FineReconstruction* keep_fine = nullptr);
 
-// FitSide, and with `fine` (k > 1) and options.fit.refine_pixel_normals: the clusters fitted on
-// the fine stack and normals (options.fit_clusters_on_fine_grid; there a pixel holds fewer yarn
-// facets, and the one-normal-per-pixel model reads a woven fabric's specular lobe less weak:
-// plain at 3x, specular 0.25 -> 0.37 for 0.5, velvet's re-render 3.6 -> 2.4 %; docs/fitting.md,
-// "Clusters on the finer grid"; tiled_side.cc does the same on a sample of the fine bands), the
-// per-pixel step on the maps' grid, and the fitted normals refined on the fine grid: each fine pixel with its nearest cluster's parameters
-// (fitting/tiled_fit.h FitPixelRows on the fine stack), their unit normals averaged onto the
-// maps' grid. Refined on the maps' grid they would lean back to the albedo-weighted normal of the
-// whole pixel (plain at 3x: 1.34 deg from photometric stereo at 3x, 1.94 after a refinement on the
-// maps' grid). The refined fine normals are also integrated on the fine grid, and `fine_height_mm`
-// (not null) gets, per map pixel, the mean of its fine heights (the truth's own definition of a
-// pixel's height, which integrating normals on the maps' grid misses at the yarn steps) for the
-// detail, and the maps' grid integration of the normals refined there for the wavelengths longer
-// than a few map pixels (the fine heights drift there). Left empty when the normals were not
-// refined on the fine grid. `fine` is released before returning.
+// FitSide, and with `fine` (k > 1) and options.fit.refine_pixel_normals: the clusters fitted on the
+// fine stack and normals (options.fit_clusters_on_fine_grid; there a pixel holds fewer yarn facets,
+// and the one-normal-per-pixel model reads a woven fabric's specular lobe less weak: plain at 3x,
+// specular 0.25 -> 0.37 for 0.5, velvet's re-render 3.6 -> 2.4 %; docs/fitting.md, "Clusters on the
+// finer grid"; tiled_side.cc does the same on a sample of the fine bands), the per-pixel step on
+// the maps' grid, and the fitted normals refined on the fine grid: each fine pixel with its nearest
+// cluster's parameters (fitting/tiled_fit.h FitPixelRows on the fine stack), their unit normals
+// averaged onto the maps' grid. Refined on the maps' grid they would lean back to the
+// albedo-weighted normal of the whole pixel (plain at 3x: 1.34 deg from photometric stereo at 3x,
+// 1.94 after a refinement on the maps' grid). The refined fine normals are also integrated on the
+// fine grid, and `fine_height_mm` (not null) gets, per map pixel, the mean of its fine heights (the
+// truth's own definition of a pixel's height, which integrating normals on the maps' grid misses at
+// the yarn steps) for the detail, and the maps' grid integration of the normals refined there for
+// the wavelengths longer than a few map pixels (the fine heights drift there). Left empty when the
+// normals were not refined on the fine grid. `fine` is released before returning.
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
                                           const StageOptions& options, RunReport* report,
                                           const ProgressCallback& progress = {}, Image* fine_height_mm = nullptr);
