@@ -4,10 +4,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "core/logging.h"
@@ -52,7 +54,9 @@ double Seconds() {
 }  // namespace
 
 bool CastShadowOptions::Check() const {
-  return std::isfinite(step_px) && step_px > 0.0 && step_px <= 4.0 && std::isfinite(bias_px) && bias_px >= 0.0;
+  return std::isfinite(step_px) && step_px > 0.0 && step_px <= 4.0 && std::isfinite(bias_px) && bias_px >= 0.0 &&
+         std::isfinite(footprint_px) && footprint_px >= 0.0 && footprint_px <= 8.0 && std::isfinite(relief_scale) &&
+         relief_scale > 0.0 && relief_scale <= 4.0;
 }
 
 CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& height_grid, Stack* stack,
@@ -78,18 +82,84 @@ CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& heigh
   }
 
   const HeightField field(height_mm);
+  const double scale = options.relief_scale;
   float max_height = -std::numeric_limits<float>::infinity();
   for (float z : height_mm.plane(0)) {
     if (std::isfinite(z)) max_height = std::max(max_height, z);
   }
   const double p = height_grid.pitch_mm;
   const double u_max = height_grid.width - 1, v_max = height_grid.height - 1;
+  const double top = scale * max_height;  // mm, on the scaled relief
+  // The footprint's sample points, in pixels of the height map's grid from the pixel centre.
+  const double half = 0.5 * options.footprint_px;
+  std::vector<std::pair<double, double>> offsets = {{0.0, 0.0}};
+  if (half > 0.0) offsets.insert(offsets.end(), {{half, 0.0}, {-half, 0.0}, {0.0, half}, {0.0, -half}});
   std::atomic<long long> marked{0};
+
+  // Whether the ray from the surface point over (u, v) (continuous pixel coordinates of the height
+  // map, inside it) toward `model` is blocked by the scaled relief.
+  auto blocked = [&](const LightModel& model, double u, double v) {
+    const double z0 = scale * field.At(u, v);
+    if (!std::isfinite(z0)) return false;
+    const Vector3d point(height_grid.x0_mm + (u + 0.5) * p, height_grid.y1_mm - (v + 0.5) * p, z0);
+    const Vector3d d = model.DirectionFrom(point);
+    if (!(d.z() > 0.0)) return true;  // below the sample plane: lights nothing
+    const double speed = std::hypot(d.x(), d.y());  // horizontal length per unit ray length
+    if (!(speed > 1e-12)) return false;
+    const double bias_mm = options.bias_px * p * d.z() / speed;
+    if (!(z0 + bias_mm < top)) return false;
+    const double du = options.step_px * d.x() / speed, dv = -options.step_px * d.y() / speed;
+    const double dz = options.step_px * p * d.z() / speed;
+    // A point light ends the ray: no march past its horizontal distance.
+    double steps_left = std::numeric_limits<double>::infinity();
+    if (model.type == LightType::kPoint) {
+      steps_left = std::hypot(model.position_in_world_mm.x() - point.x(), model.position_in_world_mm.y() - point.y()) /
+                   (options.step_px * p);
+    }
+    double z = z0;
+    for (double s = 1.0; s <= steps_left; s += 1.0) {
+      u += du, v += dv, z += dz;
+      if (u < 0.0 || v < 0.0 || u > u_max || v > v_max || z > top) return false;
+      if (z < scale * field.At(u, v) - bias_mm) return true;
+    }
+    return false;
+  };
+
+  // Aligned grids (the height map's own grid or a band of it) with a footprint of whole pixels:
+  // the footprint's points are the neighbours' centres, so each centre's ray is marched once per
+  // light, into `centre_blocked` over the stack's rows and columns widened by the footprint, and
+  // looked up, instead of marched again for each of its 4 neighbours. Same marks, up to 5 x
+  // fewer marches. Other grids (a sample at pitch k p) march every point.
+  const auto whole = [](double x) { return std::abs(x - std::round(x)) < 1e-6; };
+  const double first_col = (grid.x0_mm - height_grid.x0_mm) / p, first_row = (height_grid.y1_mm - grid.y1_mm) / p;
+  const bool aligned = half > 0.0 && whole(half) && std::abs(grid.pitch_mm - p) <= 1e-9 * p && whole(first_col) &&
+                       whole(first_row);
+  const int reach = static_cast<int>(std::lround(half));
+  const int region_c0 = aligned ? std::max(0, static_cast<int>(std::lround(first_col)) - reach) : 0;
+  const int region_r0 = aligned ? std::max(0, static_cast<int>(std::lround(first_row)) - reach) : 0;
+  const int region_c1 =
+      aligned ? std::min(height_grid.width - 1, static_cast<int>(std::lround(first_col)) + grid.width - 1 + reach) : -1;
+  const int region_r1 =
+      aligned ? std::min(height_grid.height - 1, static_cast<int>(std::lround(first_row)) + grid.height - 1 + reach) : -1;
+  const bool use_region = aligned && region_c1 >= region_c0 && region_r1 >= region_r0;
+  const int region_cols = use_region ? region_c1 - region_c0 + 1 : 0;
+  std::vector<std::uint8_t> centre_blocked(
+      use_region ? static_cast<std::size_t>(region_cols) * static_cast<std::size_t>(region_r1 - region_r0 + 1) : 0);
 
   for (std::size_t light = 0; light < by_light.size(); ++light) {
     const std::vector<std::size_t>& observations = by_light[light];
     if (observations.empty()) continue;
     const LightModel& model = stack->lights[light];
+    if (use_region) {
+      ParallelFor(static_cast<std::size_t>(region_r1 - region_r0 + 1), [&](std::size_t begin, std::size_t end) {
+        for (std::size_t r = begin; r < end; ++r) {
+          for (int c = 0; c < region_cols; ++c) {
+            centre_blocked[r * static_cast<std::size_t>(region_cols) + static_cast<std::size_t>(c)] =
+                blocked(model, region_c0 + c, region_r0 + static_cast<double>(r)) ? 1 : 0;
+          }
+        }
+      });
+    }
     ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t begin, std::size_t end) {
       long long chunk_marked = 0;
       for (std::size_t row = begin; row < end; ++row) {
@@ -102,34 +172,19 @@ CastShadowCounts MarkCastShadows(const Image& height_mm, const MetricGrid& heigh
           if (u < -kInside || v < -kInside || u > u_max + kInside || v > v_max + kInside) continue;
           u = std::clamp(u, 0.0, u_max);
           v = std::clamp(v, 0.0, v_max);
-          const double z0 = field.At(u, v);
-          if (!std::isfinite(z0)) continue;
-          const Vector3d point(centre.x(), centre.y(), z0);
-          const Vector3d d = model.DirectionFrom(point);
+          if (!std::isfinite(field.At(u, v))) continue;
           bool shadow = false;
-          if (!(d.z() > 0.0)) {
-            shadow = true;  // below the sample plane: lights nothing
-          } else {
-            const double speed = std::hypot(d.x(), d.y());  // horizontal length per unit ray length
-            const double bias_mm = speed > 1e-12 ? options.bias_px * p * d.z() / speed : 0.0;
-            if (speed > 1e-12 && z0 + bias_mm < max_height) {
-              const double du = options.step_px * d.x() / speed, dv = -options.step_px * d.y() / speed;
-              const double dz = options.step_px * p * d.z() / speed;
-              // A point light ends the ray: no march past its horizontal distance.
-              double steps_left = std::numeric_limits<double>::infinity();
-              if (model.type == LightType::kPoint) {
-                steps_left = std::hypot(model.position_in_world_mm.x() - point.x(),
-                                        model.position_in_world_mm.y() - point.y()) / (options.step_px * p);
-              }
-              double z = z0;
-              for (double s = 1.0; s <= steps_left; s += 1.0) {
-                u += du, v += dv, z += dz;
-                if (u < 0.0 || v < 0.0 || u > u_max || v > v_max || z > max_height) break;
-                if (z < field.At(u, v) - bias_mm) {
-                  shadow = true;
-                  break;
-                }
-              }
+          for (const auto& [du, dv] : offsets) {
+            // Footprint points off the map are not looked at (the map's edge has no relief beyond).
+            const double us = u + du, vs = v + dv;
+            if (us < 0.0 || vs < 0.0 || us > u_max || vs > v_max) continue;
+            const bool hit =
+                use_region ? centre_blocked[static_cast<std::size_t>(std::lround(vs) - region_r0) * region_cols +
+                                            static_cast<std::size_t>(std::lround(us) - region_c0)] != 0
+                           : blocked(model, us, vs);
+            if (hit) {
+              shadow = true;
+              break;
             }
           }
           if (!shadow) continue;

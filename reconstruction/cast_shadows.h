@@ -33,6 +33,18 @@ struct CastShadowOptions {
   // fixed height instead, 0.1 pitch, shortened a 5 deg light's shadows by 1.1 px and missed 10 % of
   // the grazing rig's shadowed observations on the true heights; test CastShadowChain.)
   double bias_px = 0.1;
+  // Partial shadows. An observation is an average over its pixel's footprint (and the
+  // rectification's resampling kernel, which reaches one pixel past the centre), so a shadow over
+  // part of the footprint darkens it too, a tens-of-sigma outlier for the fit. With footprint_px
+  // > 0 the observation is also marked when the ray from any of the 4 points footprint_px / 2
+  // pixels of the height map's grid from the pixel centre, along the grid's axes (each at its own
+  // height), is blocked: 1 covers the pixel, 2 the bilinear kernel's reach. 0: the centre only.
+  double footprint_px = 0.0;
+  // The heights the march runs over are the integrated ones times relief_scale (about any
+  // reference: the test is the same). Integrated heights are shallower than the relief that casts
+  // the shadows (photometric stereo flattens each pixel's mix of facets), so shadows come out
+  // short; > 1 lengthens them. 1: the heights as integrated.
+  double relief_scale = 1.0;
 
   bool Check() const;
 };

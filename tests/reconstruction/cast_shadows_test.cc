@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <utility>
 
 #include "render_stack.h"
 
@@ -44,6 +45,13 @@ LightModel Directional(double elevation_deg, double azimuth_deg) {
   return light;
 }
 
+// Six directional lights at one elevation, 60 deg apart in azimuth (from 10 deg).
+std::vector<LightModel> SixLightsAround(double elevation_deg) {
+  std::vector<LightModel> lights;
+  for (int k = 0; k < 6; ++k) lights.push_back(Directional(elevation_deg, 60.0 * k + 10.0));
+  return lights;
+}
+
 // One observation per light, no image data (marking reads only the geometry).
 Stack MakeStack(const MetricGrid& grid, const std::vector<LightModel>& lights) {
   Stack stack;
@@ -64,6 +72,15 @@ Image StepHeight() {
   Image h(kWidth, kHeight, 1, 0.0f, kPitchMm);
   for (int r = 0; r < kHeight; ++r)
     for (int c = kStepCol; c < kWidth; ++c) h.at(0, r, c) = static_cast<float>(kStepHeightMm);
+  return h;
+}
+
+// A field of bumps and ridges, 0.6 mm from trough to crest, in every direction.
+Image BumpyHeight() {
+  Image h(kWidth, kHeight, 1, 0.0f, kPitchMm);
+  for (int r = 0; r < kHeight; ++r)
+    for (int c = 0; c < kWidth; ++c)
+      h.at(0, r, c) = static_cast<float>(0.2 * std::sin(c * 0.37) * std::cos(r * 0.29) + 0.1 * std::sin(r * 0.71));
   return h;
 }
 
@@ -160,12 +177,8 @@ TEST(CastShadows, BandOfTheMapGetsTheWholeMapsMarks) {
   // (its rows offset) gets exactly the whole stack's marks on those rows, also where the shadow
   // falls from outside the band.
   const MetricGrid grid = Grid();
-  Image height(kWidth, kHeight, 1, 0.0f, kPitchMm);
-  for (int r = 0; r < kHeight; ++r)
-    for (int c = 0; c < kWidth; ++c)
-      height.at(0, r, c) = static_cast<float>(0.2 * std::sin(c * 0.37) * std::cos(r * 0.29) + 0.1 * std::sin(r * 0.71));
-  std::vector<LightModel> lights;
-  for (int k = 0; k < 6; ++k) lights.push_back(Directional(12.0, 60.0 * k + 10.0));
+  const Image height = BumpyHeight();
+  std::vector<LightModel> lights = SixLightsAround(12.0);
   LightModel point;
   point.type = LightType::kPoint;
   point.position_in_world_mm = Eigen::Vector3d(3.0, -6.0, 2.5);
@@ -193,12 +206,131 @@ TEST(CastShadows, BandOfTheMapGetsTheWholeMapsMarks) {
   EXPECT_GT(marked, 0);
 }
 
+// The marked columns of one row as one run [first, last]; fails when they are not contiguous.
+std::pair<int, int> MarkedRun(const Observation& o, int row) {
+  int first = -1, last = -1, count = 0;
+  for (int c = 0; c < kWidth; ++c) {
+    if (!Marked(o, row, c)) continue;
+    if (first < 0) first = c;
+    last = c;
+    ++count;
+  }
+  EXPECT_EQ(count, first < 0 ? 0 : last - first + 1) << "row " << row << ": the marks are not one run";
+  return {first, last};
+}
+
+TEST(CastShadows, FootprintMarksPixelsTheShadowOnlyPartlyCovers) {
+  // Light from +x: with a footprint of F pixels, a floor pixel is marked when its point F/2 pixels
+  // toward the wall is in shadow, so the strip reaches F/2 pixels further from the wall; and the
+  // plateau's pixels whose footprint reaches down the wall (within F/2 of it) are marked too.
+  for (const double footprint : {1.0, 2.0, 3.0}) {
+    for (const double elevation : {10.0, 20.0, 35.0}) {
+      CastShadowOptions options;
+      options.footprint_px = footprint;
+      Stack stack = MakeStack(Grid(), {Directional(elevation, 0.0)});
+      MarkCastShadows(StepHeight(), &stack, options);
+      const double shadow_px = kStepHeightMm / std::tan(elevation * std::numbers::pi / 180.0) / kPitchMm;
+      const double reach_px = shadow_px - kWallInsidePlateauPx + 0.5 * footprint;
+      for (const int r : {0, kHeight / 2, kHeight - 1}) {
+        const auto [first, last] = MarkedRun(stack.observations[0], r);
+        EXPECT_NEAR(kStepCol - first, reach_px, kStripTolerancePx) << "footprint " << footprint << ", elevation " << elevation;
+        // Plateau pixels marked: those within F/2 of the wall's foot (the last floor pixel centre).
+        EXPECT_GE(last, kStepCol - 1);
+        EXPECT_LE(last - (kStepCol - 1), std::ceil(0.5 * footprint)) << "footprint " << footprint;
+      }
+      // Away from the wall the footprint sees only lit floor.
+      Stack away = MakeStack(Grid(), {Directional(elevation, 180.0)});
+      EXPECT_EQ(MarkCastShadows(StepHeight(), &away, options).marked, 0) << "footprint " << footprint;
+    }
+  }
+  // A flat plane stays unmarked whatever the footprint.
+  CastShadowOptions wide;
+  wide.footprint_px = 4.0;
+  Stack flat = MakeStack(Grid(), {Directional(5.0, 30.0), Directional(5.0, 200.0)});
+  EXPECT_EQ(MarkCastShadows(Image(kWidth, kHeight, 1, 0.2f, kPitchMm), &flat, wide).marked, 0);
+}
+
+TEST(CastShadows, FootprintMarksAgreeOnTheWholeMapABandAndASample) {
+  // With a footprint of whole pixels the whole map and a band of it look their neighbours' centres
+  // up; a sample at pitch 2 p (every other pixel) marches each of the footprint's points. All three
+  // must give the whole map's marks on the pixels they share.
+  const MetricGrid grid = Grid();
+  const Image height = BumpyHeight();
+  const std::vector<LightModel> lights = SixLightsAround(25.0);
+  CastShadowOptions options;
+  options.footprint_px = 2.0;
+  options.relief_scale = 1.3;
+  Stack whole = MakeStack(grid, lights);
+  const CastShadowCounts with_footprint = MarkCastShadows(height, &whole, options);
+  Stack centre_only = MakeStack(grid, lights);
+  CastShadowOptions centre = options;
+  centre.footprint_px = 0.0;
+  ASSERT_GT(with_footprint.marked, MarkCastShadows(height, &centre_only, centre).marked)
+      << "the footprint adds no mark: the comparison shows nothing";
+
+  constexpr int kRow0 = 7, kRows = 11;
+  MetricGrid band_grid = grid;
+  band_grid.height = kRows;
+  band_grid.y1_mm = grid.y1_mm - kRow0 * grid.pitch_mm;
+  Stack band = MakeStack(band_grid, lights);
+  MarkCastShadows(height, grid, &band, options);
+  MetricGrid sample_grid = grid;  // pixel (r, c) centred on the map's (2r, 2c)
+  sample_grid.pitch_mm = 2.0 * kPitchMm;
+  sample_grid.width = kWidth / 2;
+  sample_grid.height = kHeight / 2;
+  sample_grid.x0_mm = grid.x0_mm - 0.5 * kPitchMm;
+  sample_grid.y1_mm = grid.y1_mm + 0.5 * kPitchMm;
+  Stack sample = MakeStack(sample_grid, lights);
+  MarkCastShadows(height, grid, &sample, options);
+  int band_differ = 0, sample_differ = 0, sample_marked = 0;
+  for (std::size_t k = 0; k < lights.size(); ++k) {
+    const auto& w = whole.observations[k].flags;
+    for (int r = 0; r < kRows; ++r)
+      for (int c = 0; c < kWidth; ++c)
+        band_differ += band.observations[k].flags[static_cast<std::size_t>(r) * kWidth + c] !=
+                       w[static_cast<std::size_t>(r + kRow0) * kWidth + c];
+    for (int r = 0; r < sample_grid.height; ++r)
+      for (int c = 0; c < sample_grid.width; ++c) {
+        const auto f = sample.observations[k].flags[static_cast<std::size_t>(r) * sample_grid.width + c];
+        sample_differ += f != w[static_cast<std::size_t>(2 * r) * kWidth + 2 * c];
+        sample_marked += f != 0;
+      }
+  }
+  EXPECT_EQ(band_differ, 0);
+  EXPECT_EQ(sample_differ, 0);
+  EXPECT_GT(sample_marked, 0);
+}
+
+TEST(CastShadows, ReliefScaleLengthensTheShadowsInProportion) {
+  // The step marched at relief_scale x its height: the strip is that much longer.
+  constexpr double kElevationDeg = 30.0;
+  for (const double scale : {1.5, 2.0}) {
+    CastShadowOptions options;
+    options.relief_scale = scale;
+    Stack stack = MakeStack(Grid(), {Directional(kElevationDeg, 0.0)});
+    MarkCastShadows(StepHeight(), &stack, options);
+    const double shadow_px = scale * kStepHeightMm / std::tan(kElevationDeg * std::numbers::pi / 180.0) / kPitchMm;
+    EXPECT_NEAR(StripBeforeWall(stack.observations[0], kHeight / 2), shadow_px - kWallInsidePlateauPx, kStripTolerancePx)
+        << "relief scale " << scale;
+  }
+}
+
 TEST(CastShadows, RejectsAHeightMapOffItsGrid) {
   Stack stack = MakeStack(Grid(), {Directional(20.0, 0.0)});
   EXPECT_THROW(MarkCastShadows(Image(kWidth - 1, kHeight, 1, 0.0f, kPitchMm), &stack), std::invalid_argument);
   CastShadowOptions bad;
   bad.step_px = 0.0;
   EXPECT_THROW(MarkCastShadows(StepHeight(), &stack, bad), std::invalid_argument);
+  for (const double footprint : {-1.0, 9.0, std::nan("")}) {
+    CastShadowOptions wrong;
+    wrong.footprint_px = footprint;
+    EXPECT_THROW(MarkCastShadows(StepHeight(), &stack, wrong), std::invalid_argument) << "footprint " << footprint;
+  }
+  for (const double scale : {0.0, -1.0, 5.0}) {
+    CastShadowOptions wrong;
+    wrong.relief_scale = scale;
+    EXPECT_THROW(MarkCastShadows(StepHeight(), &stack, wrong), std::invalid_argument) << "relief scale " << scale;
+  }
 }
 
 TEST(CastShadows, PhotometricStereoLeavesMarkedShadowsOut) {
