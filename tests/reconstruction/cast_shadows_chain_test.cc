@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <numbers>
 #include <string>
+#include <vector>
 
 #include "core/logging.h"
 #include "datasets_synthetic/renderer.h"
@@ -30,21 +31,25 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr int kCameraPixels = 96;  // 72 x 72 output pixels at 300 dpi
-// Bars for the marks against the renderer's truth (measured: bumps 0.873 / 0.944, sphere_cap
-// 0.863 / 1.000). The marks come from integrated heights, and under 5 deg lights a shadow is
-// 11 times as long as the relief that casts it: photometric stereo's flattening of the relief
+// Bars for the marks against the renderer's truth, partial shadows included as the balanced
+// preset marks them (footprint 2 px, relief scale 1.3; measured: bumps 0.964 / 0.937, sphere_cap
+// 0.961 / 0.993). The marks come from integrated heights, and under 5 deg lights a shadow is 11
+// times as long as the relief that casts it: photometric stereo's flattening of the relief
 // (normals 7-8 deg off on bumps under this rig) shortens every shadow by as much, so recall is
 // what the heights allow, not what the march allows.
 constexpr double kMinRecall = 0.85;
 constexpr double kMinPrecision = 0.93;
-// The march itself, on the scene's true heights on the grid (measured 0.946 / 1.000 and 0.984 /
-// 0.997): the rest is the renderer's finer surface (supersampled scene, tiny bias) at the
-// terminator and at the shadows' ends.
+// The march itself, on the scene's true heights on the grid at their own scale (measured 0.966 /
+// 1.000 and 0.984 / 0.997): the rest is the renderer's finer surface (supersampled scene, tiny
+// bias) at the terminator and at the shadows' ends.
 constexpr double kMinRecallOnTruth = 0.93;
 constexpr double kMinPrecisionOnTruth = 0.99;
 // Leaving the marked observations out must not make the normals worse by more than this
-// (measured: bumps 8.41 -> 7.32 deg, sphere_cap 2.626 -> 2.627 deg).
-constexpr double kNormalWorseningToleranceDeg = 0.05;
+// (measured: bumps 8.34 -> 7.73 deg, sphere_cap 2.632 -> 2.724 deg). The smooth cap pays for the
+// partial shadows under 5 deg lights: a pixel at its terminator keeps fewer lights (centre-only
+// marks: 2.632 -> 2.634), while the woven fabrics under the distant rig gain 0.1-0.4 deg
+// (docs/reconstruction.md, "Cast shadows").
+constexpr double kNormalWorseningToleranceDeg = 0.15;
 
 struct Chain {
   synthetic::Rig rig;
@@ -104,12 +109,19 @@ TEST_P(CastShadowChain, MarksMatchTheRenderersShadows) {
   const SideReconstruction marked = ReconstructSide(&stack, stages, Image(), &report);
   fs::remove_all(chain.dir);
 
-  // The marking itself on the true heights (what the reconstruction's heights cost).
+  // The marking itself on the true heights (what the reconstruction's heights cost), at the
+  // relief's own scale.
   Stack on_truth = stack;
-  reconstruction::MarkCastShadows(chain.scene.truth.height_mm, &on_truth, stages.cast_shadows);
+  reconstruction::CastShadowOptions on_truth_options = stages.cast_shadows;
+  on_truth_options.relief_scale = 1.0;
+  reconstruction::MarkCastShadows(chain.scene.truth.height_mm, &on_truth, on_truth_options);
 
-  // Truth: the renderer's own shadow test at each grid pixel's true surface point (fine scene).
+  // Truth: the renderer's own shadow test at each grid pixel's true surface point (fine scene), and
+  // at the points of the footprint the marking looks at (partial shadows count, as for the marks).
   const synthetic::SceneRenderer renderer(chain.scene.fine, chain.rig);
+  const double half_mm = 0.5 * stages.cast_shadows.footprint_px * stack.grid.pitch_mm;
+  std::vector<Eigen::Vector2d> footprint = {{0.0, 0.0}};
+  if (half_mm > 0.0) footprint.insert(footprint.end(), {{half_mm, 0.0}, {-half_mm, 0.0}, {0.0, half_mm}, {0.0, -half_mm}});
   long long both = 0, truly = 0, flagged = 0, examined = 0, both_truth = 0, flagged_truth = 0;
   for (std::size_t k = 0; k < stack.observations.size(); ++k) {
     const Observation& o = stack.observations[k];
@@ -119,8 +131,17 @@ TEST_P(CastShadowChain, MarksMatchTheRenderersShadows) {
         const std::size_t i = static_cast<std::size_t>(r) * stack.grid.width + c;
         if ((o.flags[i] & (kSaturated | kOutOfView)) != 0) continue;  // not data either way
         const Eigen::Vector3d centre = stack.grid.PixelCentreInWorld(c, r);
-        const Eigen::Vector3d point(centre.x(), centre.y(), renderer.HeightAt(centre.x(), centre.y()));
-        const bool shadow = renderer.InShadow(point, light.DirectionFrom(point));
+        bool shadow = false;
+        for (const Eigen::Vector2d& offset : footprint) {
+          const double x = centre.x() + offset.x(), y = centre.y() + offset.y();
+          const double u = (x - stack.grid.x0_mm) / stack.grid.pitch_mm, v = (stack.grid.y1_mm - y) / stack.grid.pitch_mm;
+          if (u < 0.5 || v < 0.5 || u > stack.grid.width - 0.5 || v > stack.grid.height - 0.5) continue;  // as the marking
+          const Eigen::Vector3d point(x, y, renderer.HeightAt(x, y));
+          if (renderer.InShadow(point, light.DirectionFrom(point))) {
+            shadow = true;
+            break;
+          }
+        }
         const bool mark = (o.flags[i] & kCastShadow) != 0;
         const bool mark_truth = (on_truth.observations[k].flags[i] & kCastShadow) != 0;
         flagged_truth += mark_truth;
