@@ -19,6 +19,7 @@
 #include "core/parallel.h"
 #include "core/principled_brdf.h"
 #include "fitting/shading_frame.h"
+#include "reconstruction/relief_levelling.h"
 #include "u3m/image_io.h"
 
 namespace u3mscan::bench {
@@ -267,6 +268,22 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
     return EvaluatePrincipled(params, ll, vl) * std::max(0.0, ll.z());
   };
 
+  // The run's levelling: the truth's height is then kept on the output grid (4 bytes a pixel) and
+  // levelled the same way for the second height figure.
+  reconstruction::Levelling levelling = reconstruction::Levelling::kNone;
+  if (report.contains("options") && report["options"].is_object() && report["options"].contains("levelling")) {
+    const json& field = report["options"]["levelling"];
+    try {
+      levelling = reconstruction::ParseLevelling(field.is_string() ? field.get<std::string>() : field.dump());
+    } catch (const std::invalid_argument&) {
+      throw InputError(report_path.string(), "/options/levelling", "none, plane or quadratic");
+    }
+  }
+  Image truth_height_on_grid;
+  if (levelling != reconstruction::Levelling::kNone && !height.empty()) {
+    truth_height_on_grid = Image(w, h, 1, NAN, pitch_mm);
+  }
+
   // Per-pixel errors (NaN where not compared), then summaries.
   const std::size_t n = static_cast<std::size_t>(w) * h;
   // Per pixel only what needs percentiles (12 bytes a pixel); everything else is summed per row,
@@ -307,6 +324,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
         if (!height.empty()) {
           const double truth_h = TapMean(truth.height_mm, 0, taps), d = height.at(0, row, col) - truth_h;
           if (std::isfinite(d)) {
+            if (!truth_height_on_grid.empty()) truth_height_on_grid.at(0, row, col) = static_cast<float>(truth_h);
             sums.height_d += d;
             sums.height_d2 += d * d;
             sums.height_lo = std::min(sums.height_lo, truth_h);
@@ -412,6 +430,27 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   } else {
     ev.height_rmse_mm = ev.height_range_mm = ev.height_rmse_percent = kNaN;
   }
+  ev.height_levelling = reconstruction::LevellingName(levelling);
+  if (!truth_height_on_grid.empty() && all.height_count > 0) {
+    // Pixels not compared are NaN in the truth: they weigh 0 in the levelling and are skipped here.
+    reconstruction::LevelRelief(levelling, &truth_height_on_grid, nullptr);
+    double sum = 0.0, sum2 = 0.0;
+    long long count = 0;
+    for (int row = 0; row < h; ++row)
+      for (int col = 0; col < w; ++col) {
+        const double d = static_cast<double>(height.at(0, row, col)) - truth_height_on_grid.at(0, row, col);
+        if (!std::isfinite(d)) continue;
+        sum += d;
+        sum2 += d * d;
+        ++count;
+      }
+    if (count > 0) {
+      const double mean = sum / static_cast<double>(count);
+      ev.height_levelled_rmse_mm = std::sqrt(std::max(0.0, sum2 / static_cast<double>(count) - mean * mean));
+      ev.height_levelled_rmse_percent =
+          ev.height_range_mm > 0 ? 100.0 * ev.height_levelled_rmse_mm / ev.height_range_mm : kNaN;
+    }
+  }
 
   for (int p = 0; p < kParameterCount; ++p) {
     ParameterError& e = ev.parameters[p];
@@ -439,7 +478,9 @@ json EvaluationToJson(const Evaluation& ev) {
           {"normal_error_deg", {{"mean", Number(ev.normal_mean_deg)}, {"median", Number(ev.normal_median_deg)}, {"p95", Number(ev.normal_p95_deg)}}},
           {"albedo_ciede2000", {{"mean", Number(ev.albedo_de_mean)}, {"median", Number(ev.albedo_de_median)}, {"p95", Number(ev.albedo_de_p95)}}},
           {"base_color_ciede2000", {{"mean", Number(ev.base_color_de_mean)}, {"median", Number(ev.base_color_de_median)}, {"p95", Number(ev.base_color_de_p95)}}},
-          {"height", {{"rmse_mm", Number(ev.height_rmse_mm)}, {"range_mm", Number(ev.height_range_mm)}, {"rmse_percent_of_range", Number(ev.height_rmse_percent)}}},
+          {"height", {{"rmse_mm", Number(ev.height_rmse_mm)}, {"range_mm", Number(ev.height_range_mm)}, {"rmse_percent_of_range", Number(ev.height_rmse_percent)},
+                      {"truth_levelled", {{"levelling", ev.height_levelling}, {"rmse_mm", Number(ev.height_levelled_rmse_mm)},
+                                          {"rmse_percent_of_range", Number(ev.height_levelled_rmse_percent)}}}}},
           {"parameters", parameters},
           {"rerender", {{"held_out_lights", ev.held_out_lights}, {"relative_rmse", Number(ev.rerender_relative_rmse)}}}};
 }
@@ -462,6 +503,10 @@ std::string EvaluationToText(const Evaluation& ev) {
     << "  p95 " << Fixed(ev.base_color_de_p95, 3) << "\n";
   s << "height RMSE (offset removed) " << Fixed(ev.height_rmse_mm * 1000.0, 2) << " um = " << Fixed(ev.height_rmse_percent, 2)
     << " % of the " << Fixed(ev.height_range_mm * 1000.0, 1) << " um range\n";
+  if (ev.height_levelling != "none") {
+    s << "height RMSE, truth levelled (" << ev.height_levelling << ", as the run) " << Fixed(ev.height_levelled_rmse_mm * 1000.0, 2)
+      << " um = " << Fixed(ev.height_levelled_rmse_percent, 2) << " % of the same range\n";
+  }
   for (const auto& p : ev.parameters) {
     s << "  " << std::left << std::setw(14) << p.name << std::right;
     if (!p.measured) {

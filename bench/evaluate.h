@@ -13,6 +13,7 @@
 // Definitions and units are in docs/bench.md.
 
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,14 @@ struct Evaluation {
   double base_color_de_mean = 0, base_color_de_median = 0, base_color_de_p95 = 0;
   // Height RMSE after removing the mean offset, mm and % of the truth's height range.
   double height_rmse_mm = 0, height_range_mm = 0, height_rmse_percent = 0;
+  // The run's levelling (report.json /options/levelling; "none" when absent) and, when it is not
+  // none, the height RMSE against the truth levelled the same way (reconstruction/relief_levelling.h
+  // over the compared pixels), mm and % of the same (unlevelled) range: a tilt or bowl of the
+  // truth's own, which a levelled run takes out by design, is then not counted as error. NaN
+  // otherwise.
+  std::string height_levelling = "none";
+  double height_levelled_rmse_mm = std::numeric_limits<double>::quiet_NaN();
+  double height_levelled_rmse_percent = std::numeric_limits<double>::quiet_NaN();
   std::vector<ParameterError> parameters;  // fitting::FitParameter order
   // Re-render error under held-out lights: sqrt(sum (fit - truth)^2 / sum truth^2) over compared
   // pixels, RGB and lights, both rendered with core/principled_brdf.h (no cast shadows), view

@@ -17,6 +17,7 @@
 #include "bench/truth_maps.h"
 #include "core/error.h"
 #include "datasets_synthetic/truth_writer.h"
+#include "reconstruction/relief_levelling.h"
 #include "u3m/image_io.h"
 
 namespace u3mscan::bench {
@@ -249,6 +250,49 @@ TEST_F(EvaluateTest, AveragesTheTruthOverEachPixelOfACoarserOutput) {
   std::cout << "measured: 3x coarser output, footprint means " << averaged.normal_mean_deg << " deg, centre samples "
             << point.normal_mean_deg << " deg\n";
   EXPECT_GT(point.normal_mean_deg, kPointSampleMinErrorDeg);
+}
+
+// Sets report.json /options/levelling of an output folder.
+void SetLevelling(const fs::path& out, const nlohmann::json& levelling) {
+  nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
+  report["options"]["levelling"] = levelling;
+  std::ofstream(out / "report.json") << report.dump(2);
+}
+
+TEST_F(EvaluateTest, ALevelledRunIsAlsoComparedWithTheTruthLevelledAlike) {
+  // The truth holds a tilt of its own (kTiltMm across the map in x); the run wrote the relief with
+  // the tilt taken out (--level plane), as the pipeline does. Against the truth as it is, the tilt
+  // counts as error; against the truth levelled alike, nothing is left.
+  constexpr double kTiltMm = 0.05;
+  synthetic::SceneTruth tilted = scene_;
+  for (int r = 0; r < kSize; ++r)
+    for (int c = 0; c < kSize; ++c) tilted.height_mm.at(0, r, c) += static_cast<float>(kTiltMm * c / (kSize - 1));
+  const fs::path truth = root_ / "tilted_truth";
+  synthetic::WriteTruth(tilted, nullptr, truth);
+  const fs::path out = WriteOutput(0.0, 0.0);
+  Image levelled = tilted.height_mm;
+  reconstruction::LevelRelief(reconstruction::Levelling::kPlane, &levelled, nullptr);
+  WriteMap(levelled, out / "maps" / "height.exr");
+
+  // No levelling in the report: one figure, the tilt's RMS (a ramp of kTiltMm: kTiltMm / sqrt(12))
+  // plus what taking out the truth's own small plane moved.
+  const Evaluation plain = Evaluate(out, truth);
+  EXPECT_EQ(plain.height_levelling, "none");
+  EXPECT_TRUE(std::isnan(plain.height_levelled_rmse_mm));
+  EXPECT_GT(plain.height_rmse_mm, 0.5 * kTiltMm / std::sqrt(12.0));
+  EXPECT_EQ(EvaluationToText(plain).find("truth levelled"), std::string::npos);
+
+  SetLevelling(out, "plane");
+  const Evaluation level = Evaluate(out, truth);
+  EXPECT_EQ(level.height_levelling, "plane");
+  EXPECT_NEAR(level.height_rmse_mm, plain.height_rmse_mm, kZeroTolerance * 1e-3);  // the first figure is unchanged
+  EXPECT_NEAR(level.height_levelled_rmse_mm, 0.0, kZeroTolerance * 1e-3);
+  EXPECT_NEAR(level.height_levelled_rmse_percent, 0.0, kZeroTolerance);
+  EXPECT_NE(EvaluationToText(level).find("truth levelled (plane"), std::string::npos);
+  EXPECT_TRUE(EvaluationToJson(level)["height"]["truth_levelled"]["rmse_mm"].is_number());
+
+  SetLevelling(out, "tilted");
+  EXPECT_THROW(Evaluate(out, truth), InputError);
 }
 
 TEST_F(EvaluateTest, MissingDebugMapsIsAnInputError) {
