@@ -396,7 +396,7 @@ std::vector<std::string> BenchCsvColumns() {
           "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
-          "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
+          "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
           "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"};
 }
 
@@ -415,7 +415,8 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
         v(r.stages.rectify, 3), v(r.stages.alpha, 3), v(r.stages.photometric_stereo, 3), v(r.stages.integration, 3),
         v(r.stages.fit, 3), v(r.stages.write, 3), Join(r.skipped, "; "), v(e.normal_mean_deg, 3),
         v(e.normal_median_deg, 3), v(e.normal_p95_deg, 3), v(e.albedo_de_mean, 3), v(e.base_color_de_mean, 3),
-        v(e.height_rmse_mm, 5), v(e.height_rmse_percent, 2)};
+        v(e.height_rmse_mm, 5), v(e.height_rmse_percent, 2),
+        ok && std::isfinite(e.height_levelled_rmse_percent) ? Fixed(e.height_levelled_rmse_percent, 2) : std::string()};
     for (int p = 0; p < 7; ++p) cells.push_back(ParameterCell(r, p));
     cells.push_back(v(e.rerender_relative_rmse, 4));
     cells.push_back(ok && std::isfinite(r.held_out_rmse) ? Fixed(r.held_out_rmse, 4) : std::string());

@@ -14,7 +14,7 @@ EXPECTED_COLUMNS = [
     "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
-    "height_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
+    "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
     "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"]
 PLOTS = ["error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"]
 
@@ -43,6 +43,11 @@ def main():
                 fail(f"{column} = {r[column]!r}")
         if float(r["normal_mean_deg"]) > 90.0:
             fail(f"normal error out of range: {r['normal_mean_deg']}")
+        # A levelled run also has its height against the truth levelled alike; none has none.
+        if (r["level"] != "none") != (r["height_levelled_rmse_pct"] != ""):
+            fail(f"height_levelled_rmse_pct {r['height_levelled_rmse_pct']!r} for level {r['level']!r}")
+        if r["height_levelled_rmse_pct"] and not float(r["height_levelled_rmse_pct"]) >= 0.0:
+            fail(f"height_levelled_rmse_pct = {r['height_levelled_rmse_pct']!r}")
     if {r["preset"] for r in records} != {"fast", "balanced", "best"}:
         fail("not every preset ran")
     if not {"distant", "near", "oblique"} <= {r["rig"] for r in records}:
