@@ -407,6 +407,8 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     const Evaluation& e = r.evaluation;
     const bool ok = r.status == "ok";
     auto v = [&](double x, int d) { return ok ? Fixed(x, d) : std::string(); };
+    // A figure only some runs have (NaN for the others): empty then.
+    auto optional = [&](double x, int d) { return ok && std::isfinite(x) ? Fixed(x, d) : std::string(); };
     std::vector<std::string> cells = {
         r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), std::to_string(r.c.camera_per_map),
         std::to_string(r.c.ps_supersample), r.c.level, v(r.megapixels, 4), std::to_string(r.lights_used),
@@ -416,10 +418,10 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
         v(r.stages.fit, 3), v(r.stages.write, 3), Join(r.skipped, "; "), v(e.normal_mean_deg, 3),
         v(e.normal_median_deg, 3), v(e.normal_p95_deg, 3), v(e.albedo_de_mean, 3), v(e.base_color_de_mean, 3),
         v(e.height_rmse_mm, 5), v(e.height_rmse_percent, 2),
-        ok && std::isfinite(e.height_levelled_rmse_percent) ? Fixed(e.height_levelled_rmse_percent, 2) : std::string()};
+        optional(e.height_levelled_rmse_percent, 2)};
     for (int p = 0; p < 7; ++p) cells.push_back(ParameterCell(r, p));
     cells.push_back(v(e.rerender_relative_rmse, 4));
-    cells.push_back(ok && std::isfinite(r.held_out_rmse) ? Fixed(r.held_out_rmse, 4) : std::string());
+    cells.push_back(optional(r.held_out_rmse, 4));
     cells.push_back(Join(r.unreliable, "; "));
     cells.push_back(r.error);
     for (auto& cell : cells) cell = Csv(cell);

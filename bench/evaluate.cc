@@ -38,6 +38,13 @@ constexpr const char* kU3mKeys[kParameterCount] = {"roughness",  "specular_value
                                                    "sheen_tint", "anisotropy_value", "metalness"};
 constexpr double kU3mDefaults[kParameterCount] = {0.7, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0};
 
+// RMS of differences about their mean (the offset removed), from their sum, sum of squares and
+// count (> 0).
+double RmsAboutMean(double sum, double sum2, double count) {
+  const double mean = sum / count;
+  return std::sqrt(std::max(0.0, sum2 / count - mean * mean));
+}
+
 json ReadJsonFile(const fs::path& path, const std::string& what) {
   std::ifstream in(path);
   if (!in) throw InputError(path.string(), "", what);
@@ -423,8 +430,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
     all.render_den += r.render_den;
   }
   if (all.height_count > 0) {
-    const double count = static_cast<double>(all.height_count), mean = all.height_d / count;
-    ev.height_rmse_mm = std::sqrt(std::max(0.0, all.height_d2 / count - mean * mean));
+    ev.height_rmse_mm = RmsAboutMean(all.height_d, all.height_d2, static_cast<double>(all.height_count));
     ev.height_range_mm = all.height_hi - all.height_lo;
     ev.height_rmse_percent = ev.height_range_mm > 0 ? 100.0 * ev.height_rmse_mm / ev.height_range_mm : kNaN;
   } else {
@@ -445,8 +451,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
         ++count;
       }
     if (count > 0) {
-      const double mean = sum / static_cast<double>(count);
-      ev.height_levelled_rmse_mm = std::sqrt(std::max(0.0, sum2 / static_cast<double>(count) - mean * mean));
+      ev.height_levelled_rmse_mm = RmsAboutMean(sum, sum2, static_cast<double>(count));
       ev.height_levelled_rmse_percent =
           ev.height_range_mm > 0 ? 100.0 * ev.height_levelled_rmse_mm / ev.height_range_mm : kNaN;
     }

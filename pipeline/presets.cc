@@ -24,11 +24,6 @@ StageOptions OptionsForPreset(Preset preset) {
   using reconstruction::Integrator;
   using reconstruction::PsSolver;
   StageOptions options;
-  // Cast shadows marked with partial shadows (docs/reconstruction.md, "Cast shadows"): the
-  // resampling kernel's reach and the relief the integrated heights smooth away. Measured on the
-  // six fabric scenes, every preset.
-  options.cast_shadows.footprint_px = 2.0;
-  options.cast_shadows.relief_scale = 1.3;
   switch (preset) {
     case Preset::kFast:
       options.photometric_stereo.solver = PsSolver::kLeastSquares;

@@ -33,7 +33,11 @@ struct StageOptions {
   // fit (reconstruction/cast_shadows.h). On in every preset: marking costs one march per pixel and
   // light, plus (distant lights) one integration and one more solve.
   bool mark_cast_shadows = true;
-  reconstruction::CastShadowOptions cast_shadows;
+  // Partial shadows too, the same in every preset: a footprint of 2 px (the resampling kernel's
+  // reach) and the relief x 1.3 (what the integrated heights smooth away); measured on the six
+  // fabric scenes (docs/reconstruction.md, "Cast shadows"). CastShadowOptions' own defaults mark
+  // from the pixel centre on the heights as they are.
+  reconstruction::CastShadowOptions cast_shadows{.footprint_px = 2.0, .relief_scale = 1.3};
   fitting::FitOptions fit;
   // With photometric stereo on a finer grid (--ps-supersample): the fit's clusters (gather,
   // k-means, Ceres fits, observability) on the fine stack (bands: a sample of it) and its normals,
