@@ -69,8 +69,9 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                  "on the finer grid when that exceeds --max-memory)")
       ->capture_default_str();
   sub.add_flag("--fit-on-maps-grid", args->options.fit_on_maps_grid,
-               "With --ps-supersample: fit the clusters on the maps' grid, not the finer one (for "
-               "comparisons; docs/fitting.md, Clusters on the finer grid)");
+               "With --ps-supersample: fit the clusters and take the base colour on the maps' grid, not the "
+               "finer one (for comparisons; docs/fitting.md, Clusters on the finer grid, Base colour from the "
+               "finer grid)");
   sub.add_option("--level", args->options.levelling,
                  "The sample's low-order shape taken out of the height and normal maps: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "

@@ -44,6 +44,12 @@ struct StageOptions {
   // where a pixel holds fewer yarn facets, instead of on the maps' (pipeline/supersampled_reconstruction.h).
   // Off only for comparisons (`process --fit-on-maps-grid`).
   bool fit_clusters_on_fine_grid = true;
+  // With photometric stereo on a finer grid, and the fit's per-pixel step run there for the
+  // normals (FitOptions::refine_pixel_normals): each map pixel's base colour is the mean of its
+  // fitted fine pixels' (pipeline/fine_colour.h), not the maps' grid's, whose observations are
+  // dimmed in the crevices by shadows the maps' heights do not mark. Off only for comparisons
+  // (`process --fit-on-maps-grid`).
+  bool base_colour_from_fine_grid = true;
 };
 
 StageOptions OptionsForPreset(Preset preset);

@@ -221,6 +221,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   if (!options.fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(options.fit_mode);
   stages.mark_cast_shadows = !options.no_cast_shadows;
   stages.fit_clusters_on_fine_grid = !options.fit_on_maps_grid;
+  stages.base_colour_from_fine_grid = !options.fit_on_maps_grid;
   report.options = {{"cast_shadows", stages.mark_cast_shadows}, {"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
                     {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
@@ -230,6 +231,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"ps_supersample", options.ps_supersample},
                     {"levelling", options.levelling},
                     {"fit_clusters_on_fine_grid", stages.fit_clusters_on_fine_grid},
+                    {"base_colour_from_fine_grid", stages.base_colour_from_fine_grid},
                     {"hold_out_lights", options.hold_out_lights}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 

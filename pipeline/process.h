@@ -32,8 +32,9 @@ struct ProcessOptions {
   std::string integrator;               // dct | robust
   std::string fit_mode;                 // clusters | per-pixel (fitting::FitMode)
   bool no_cast_shadows = false;         // do not mark cast shadows (on in every preset; for comparisons)
-  // With --ps-supersample, fit the clusters on the maps' grid instead of the finer one
-  // (StageOptions::fit_clusters_on_fine_grid; for comparisons).
+  // With --ps-supersample, fit the clusters and take the base colour on the maps' grid instead of
+  // the finer one (StageOptions::fit_clusters_on_fine_grid, base_colour_from_fine_grid; for
+  // comparisons).
   bool fit_on_maps_grid = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
   // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need

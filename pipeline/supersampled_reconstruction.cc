@@ -10,6 +10,7 @@
 
 #include "capture/stack_builder.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/fine_colour.h"
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
@@ -181,6 +182,13 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
     fitting::PixelTally fine_tally;
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
+    // The base colour from the fine pixels' own (fine_colour.h: the maps' observations are dimmed
+    // by shadows their heights cannot mark).
+    if (options.base_colour_from_fine_grid) {
+      FineColourAverage colour(stack.grid.width, stack.grid.height, k);
+      colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0);
+      colour.ApplyTo(fit.cluster_id, &fit.base_color);
+    }
     if (!fine_fit.normals.empty()) {
       Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
       fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm);

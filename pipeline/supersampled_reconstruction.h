@@ -84,7 +84,9 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 // truth's own definition of a pixel's height, which integrating normals on the maps' grid misses at
 // the yarn steps) for the detail, and the maps' grid integration of the normals refined there for
 // the wavelengths longer than a few map pixels (the fine heights drift there). Left empty when the
-// normals were not refined on the fine grid. `fine` is released before returning.
+// normals were not refined on the fine grid. The same fine step gives the base colour
+// (options.base_colour_from_fine_grid, fine_colour.h): each map pixel the mean of its fitted fine
+// pixels'. `fine` is released before returning.
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
                                           const StageOptions& options, RunReport* report,
                                           const ProgressCallback& progress = {}, Image* fine_height_mm = nullptr);

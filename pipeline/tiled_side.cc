@@ -8,6 +8,7 @@
 #include "capture/stack_builder.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
+#include "pipeline/fine_colour.h"
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
@@ -485,6 +486,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     const double fine_start = StageClock();
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
+    FineColourAverage colour(grid.width, grid.height, fine_factor);  // fine_colour.h
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
       const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
@@ -493,8 +495,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
                             &band_fit, &fine_tally);
       PasteRows(band_fit.normals, row0, &fine_normals);
+      if (options.base_colour_from_fine_grid) colour.Add(band_fit.base_color, band_fit.cluster_id, row0);
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
+    if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
     const Image maps_normals = std::move(out.fit.normals);  // refined on the maps' grid: the long wavelengths
     out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm);
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),

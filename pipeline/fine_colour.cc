@@ -1,0 +1,60 @@
+#include "pipeline/fine_colour.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace u3mscan {
+
+FineColourAverage::FineColourAverage(int maps_width, int maps_height, int k)
+    : width_(maps_width), height_(maps_height), k_(k) {
+  if (maps_width < 0 || maps_height < 0 || k < 1) throw std::invalid_argument("FineColourAverage: bad grid or factor");
+  const std::size_t pixels = static_cast<std::size_t>(maps_width) * static_cast<std::size_t>(maps_height);
+  sum_.assign(3 * pixels, 0.0f);
+  count_.assign(pixels, 0);
+}
+
+void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, int fine_row0) {
+  const int rows = base_color.height();
+  if (base_color.channels() != 3 || cluster_id.channels() != 1 || base_color.width() != width_ * k_ ||
+      cluster_id.width() != base_color.width() || cluster_id.height() != rows || fine_row0 < 0 ||
+      fine_row0 + rows > height_ * k_) {
+    throw std::invalid_argument("FineColourAverage::Add: rows " + std::to_string(fine_row0) + " + " +
+                                std::to_string(rows) + " of 3-channel colour and 1-channel cluster ids, " +
+                                std::to_string(width_ * k_) + " wide, must lie on the fine grid (" +
+                                std::to_string(width_ * k_) + " x " + std::to_string(height_ * k_) + ")");
+  }
+  for (int r = 0; r < rows; ++r) {
+    const std::size_t map_row = static_cast<std::size_t>((fine_row0 + r) / k_) * static_cast<std::size_t>(width_);
+    for (int c = 0; c < base_color.width(); ++c) {
+      if (!(cluster_id.at(0, r, c) >= 0.0f)) continue;
+      const float red = base_color.at(0, r, c), green = base_color.at(1, r, c), blue = base_color.at(2, r, c);
+      if (!std::isfinite(red) || !std::isfinite(green) || !std::isfinite(blue)) continue;
+      const std::size_t i = map_row + static_cast<std::size_t>(c / k_);
+      sum_[3 * i] += red;
+      sum_[3 * i + 1] += green;
+      sum_[3 * i + 2] += blue;
+      ++count_[i];
+    }
+  }
+}
+
+long long FineColourAverage::ApplyTo(const Image& maps_cluster_id, Image* maps_base_color) const {
+  if (maps_base_color->channels() != 3 || maps_base_color->width() != width_ || maps_base_color->height() != height_ ||
+      maps_cluster_id.channels() != 1 || maps_cluster_id.width() != width_ || maps_cluster_id.height() != height_) {
+    throw std::invalid_argument("FineColourAverage::ApplyTo: base colour (3 channels) and cluster ids (1) must be " +
+                                std::to_string(width_) + " x " + std::to_string(height_));
+  }
+  long long set = 0;
+  for (int r = 0; r < height_; ++r) {
+    for (int c = 0; c < width_; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(c);
+      if (count_[i] == 0 || !(maps_cluster_id.at(0, r, c) >= 0.0f)) continue;
+      for (int ch = 0; ch < 3; ++ch) maps_base_color->at(ch, r, c) = sum_[3 * i + ch] / static_cast<float>(count_[i]);
+      ++set;
+    }
+  }
+  return set;
+}
+
+}  // namespace u3mscan
