@@ -187,21 +187,45 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     return counts;
   };
 
+  // With a fine factor and distant lights, the fine bands' cast shadows are marked from heights
+  // integrated on the whole fine grid (as one band marks its fine stack: RunPhotometricStereoMarkingShadows
+  // there), not from the maps' heights taken there bilinearly, which are too smooth to place the
+  // shadows of a yarn's wall (plain at 3x in 3 bands: normals 1.27 -> 1.13 deg, base colour dE
+  // 0.92 -> 0.49; one band 1.14 and 0.50; docs/process.md). The first sweep keeps the fine unit normals and confidence
+  // for it (16 B a fine pixel, released once integrated).
+  Image fine_shadow_height;
+  Image fine_first_normal, fine_first_confidence;
+
   // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
   // cast shadows marked from the whole-map heights `marks_from` (nullptr: none). With a fine factor
-  // the bands are the fine grid's, the heights taken there bilinearly, and each band's result
-  // averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be null
-  // (the sample is on the maps' grid: a sweep of its own gathers it).
-  auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage) {
+  // the bands are the fine grid's, the heights taken there bilinearly (the marks from
+  // fine_shadow_height instead when it is set and `marks_from` is shadow_height), and each band's
+  // result averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be
+  // null (the sample is on the maps' grid: a sweep of its own gathers it). `keep_fine`: the fine
+  // bands' normals and confidence are also pasted into fine_first_normal and fine_first_confidence.
+  Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
+  auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
+                         bool keep_fine = false) {
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
     Bands& solved = fine_factor > 1 ? fine_bands : bands;
     const MetricGrid& solve_grid = solved.grid();
     Image fine_height, fine_marks;
     if (fine_factor > 1 && height) fine_height = UpsampleLinear(*height, fine_factor);
-    if (fine_factor > 1 && marks_from && marks_from != height) fine_marks = UpsampleLinear(*marks_from, fine_factor);
+    const bool fine_heights_mark = fine_factor > 1 && marks_from == &shadow_height && !fine_shadow_height.empty();
+    if (fine_factor > 1 && marks_from && marks_from != height && !fine_heights_mark) {
+      fine_marks = UpsampleLinear(*marks_from, fine_factor);
+    }
     const Image* solve_height = fine_factor > 1 ? (height ? &fine_height : nullptr) : height;
-    const Image* marks = fine_factor > 1 ? (marks_from ? (marks_from == height ? &fine_height : &fine_marks) : nullptr) : marks_from;
+    const Image* marks = fine_factor > 1 ? (marks_from ? (fine_heights_mark          ? &fine_shadow_height
+                                                          : marks_from == height ? &fine_height
+                                                                                 : &fine_marks)
+                                                       : nullptr)
+                                         : marks_from;
+    if (keep_fine && fine_factor > 1) {
+      fine_first_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
+      fine_first_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
+    }
     for (int b = 0; b < solved.count(); ++b) {
       Stack band = solved.Build(frames, b);
       if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
@@ -216,6 +240,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        : Image(solve_grid.width, solved.Rows(b), 1, static_cast<float>(ps_options.integration.mean_height_mm),
                                solve_grid.pitch_mm);
       PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
+      if (keep_fine && fine_factor > 1) {
+        PasteRows(band_ps.normal, solved.Row0(b), &fine_first_normal);
+        PasteRows(band_ps.confidence, solved.Row0(b), &fine_first_confidence);
+      }
       if (fine_factor > 1) band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm);
       PasteBand(band_ps, bands.Row0(b), &full);
       solve_seconds += StageClock() - start;
@@ -253,6 +281,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     out.sample = sample_sweep("photometric stereo (sample)");
     keep_checked_frames();
   }
+  // Fine bands of distant lights whose shadows are marked: the first solve's fine normals kept
+  // for the fine heights (fine_shadow_height above). The sample, and so the lights, are known.
+  const bool keep_fine_normals = fine_factor > 1 && options.mark_cast_shadows &&
+                                 !(HasPointLights(out.sample) && ps_options.refine_height);
   if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
@@ -264,17 +296,16 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ps_options.diffuse_roughness = roughness;
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals);
   } else if (fine_factor > 1) {
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");  // on the fine bands, the sample taken above
+    // On the fine bands, the sample taken above.
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals);
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
     if (keep_checked_frames()) ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo");  // without the frames left out
   }
   const bool near = HasPointLights(out.sample);
-  // The whole-map heights the final marks come from (empty: marking off).
-  Image shadow_height;
 
   // Distant lights (or near ones without refinement): integrate, mark, one more sweep
   // (RunPhotometricStereoMarkingShadows band by band). The solve stays at the anchor plane.
@@ -283,6 +314,13 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     integration.pitch_mm = grid.pitch_mm;
     const double start = StageClock();
     shadow_height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
+    if (!fine_first_normal.empty()) {
+      integration.pitch_mm = fine_calibration.grid.pitch_mm;
+      fine_shadow_height =
+          reconstruction::IntegrateNormals(fine_first_normal, fine_first_confidence, integration).height_mm;
+      fine_first_normal = Image();
+      fine_first_confidence = Image();
+    }
     shadow_seconds += StageClock() - start;
     ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)");
   }
@@ -426,11 +464,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (!geometry.photometric_stereo.height_mm.empty()) {
       fine_solve_height = UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
     }
-    if (!shadow_height.empty()) fine_marks = UpsampleLinear(shadow_height, fine_factor);
+    if (!shadow_height.empty() && fine_shadow_height.empty()) fine_marks = UpsampleLinear(shadow_height, fine_factor);
   }
   auto solve_fine_band = [&](int b, Stack* band) {
     *band = fine_bands.Build(frames, b);
-    if (!fine_marks.empty()) mark(fine_marks, fine_grid, band);
+    if (!fine_shadow_height.empty()) {
+      mark(fine_shadow_height, fine_grid, band);
+    } else if (!fine_marks.empty()) {
+      mark(fine_marks, fine_grid, band);
+    }
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     return reconstruction::SolvePhotometricStereoAt(
         *band, ps_options,
