@@ -46,9 +46,9 @@ struct StageOptions {
   bool fit_clusters_on_fine_grid = true;
   // With photometric stereo on a finer grid, and the fit's per-pixel step run there for the
   // normals (FitOptions::refine_pixel_normals): each map pixel's base colour is the mean of its
-  // fitted fine pixels' (pipeline/fine_colour.h), not the maps' grid's, whose observations are
-  // dimmed in the crevices by shadows the maps' heights do not mark. Off only for comparisons
-  // (`process --fit-on-maps-grid`).
+  // fitted fine pixels' (pipeline/fine_colour.h), not the maps' grid's fit, which takes the spread
+  // of a map pixel's facet normals for a darker colour (crevices 4-6 L*). Off only for
+  // comparisons (`process --fit-on-maps-grid`).
   bool base_colour_from_fine_grid = true;
 };
 

@@ -182,8 +182,8 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
     fitting::PixelTally fine_tally;
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
-    // The base colour from the fine pixels' own (fine_colour.h: the maps' observations are dimmed
-    // by shadows their heights cannot mark).
+    // The base colour from the fine pixels' own (fine_colour.h: a map pixel's spread of facet
+    // normals reads as a darker colour on the maps' grid).
     if (options.base_colour_from_fine_grid) {
       FineColourAverage colour(stack.grid.width, stack.grid.height, k);
       colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0);
