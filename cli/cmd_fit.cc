@@ -7,7 +7,9 @@
 #include "cli/command.h"
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
+#include "pipeline/relief_registration.h"
 #include "pipeline/stages.h"
+#include "pipeline/view_parallax.h"
 
 namespace u3mscan::cli {
 namespace {
@@ -42,6 +44,8 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
     Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    // Heights integrated along the camera's rays (pipeline/view_parallax.h); the frames lie on the plane.
+    SetViewParallax(SideViews(prepared, args->side), prepared.calibration, /*rectified_on_relief=*/false, &stages);
     const SideReconstruction geometry = ReconstructSide(&stack, stages, Image(), &report, bar.Callback());
     const fitting::FitResult fit = FitSide(stack, geometry, stages, &report, bar.Callback());
     bar.Finish();

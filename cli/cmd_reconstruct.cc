@@ -8,7 +8,9 @@
 #include "cli/stage_outputs.h"
 #include "pipeline/stages.h"
 #include "pipeline/supersampled_reconstruction.h"
+#include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
+#include "pipeline/view_parallax.h"
 
 namespace u3mscan::cli {
 namespace {
@@ -59,6 +61,8 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
     Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
+    // Heights integrated along the camera's rays (pipeline/view_parallax.h); the frames lie on the plane.
+    SetViewParallax(SideViews(prepared, args->side), prepared.calibration, /*rectified_on_relief=*/false, &stages);
     bool flats = false;
     for (const Observation& o : stack.observations) flats = flats || !o.irradiance.empty();
     std::string lowered;

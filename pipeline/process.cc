@@ -17,6 +17,7 @@
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/stages.h"
+#include "pipeline/view_parallax.h"
 #include "pipeline/tiled_side.h"
 #include "pipeline/tiles.h"
 #include "capture/stack_builder.h"
@@ -303,6 +304,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     const Stack views = SideViews(prepared, side);
     const bool tilted_view = NeedsReliefRegistration(views);
     if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
+    // Heights integrated along the camera's rays (view_parallax.h); not when registered on the relief.
+    SetViewParallax(views, prepared.calibration, tilted_view, &side_stages);
     // --ps-supersample: photometric stereo on a grid k times finer; the bands are planned so that
     // each one's fine stack fits the budget (one band when the whole fine stack does).
     const int k = options.ps_supersample == 0 ? PsSupersampleForCameras(prepared.calibration, views)
@@ -331,7 +334,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       fit = FitSideWithFineNormals(stack, reconstruction, std::move(fine), side_stages, &report, progress, &fine_height);
       const bool near = HasPointLights(stack);
       fitted_normals = fine_height.empty()
-                           ? AdoptFittedNormals(&fit, stack.grid, near, stages, &reconstruction, &report, progress)
+                           ? AdoptFittedNormals(&fit, stack.grid, near, side_stages, &reconstruction, &report, progress)
                            : AdoptFineFittedNormals(&fit, std::move(fine_height), &reconstruction, &report);
       if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());
       residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);

@@ -25,7 +25,11 @@ bool IntegrationOptions::Check() const {
   return pitch_mm >= 0.0 && std::isfinite(pitch_mm) && min_normal_z > 0.0 && min_normal_z < 1.0 &&
          std::isfinite(mean_height_mm) && robust_iterations >= 0 && min_residual_slope > 0.0 &&
          min_edge_weight > 0.0 && min_edge_weight <= 1.0 && cg_tolerance > 0.0 && robust_round_cg_tolerance > 0.0 &&
-         settled_edge_fraction >= 0.0 && max_cg_iterations > 0;
+         settled_edge_fraction >= 0.0 && max_cg_iterations > 0 &&
+         (!parallax.enabled || (parallax.camera_z_mm - parallax.plane_z_mm > 0.0 && parallax.min_stretch > 0.0 &&
+                                parallax.min_stretch <= 1.0 && std::isfinite(parallax.camera_x_mm) &&
+                                std::isfinite(parallax.camera_y_mm) && std::isfinite(parallax.x0_mm) &&
+                                std::isfinite(parallax.y1_mm)));
 }
 
 namespace {
@@ -525,6 +529,7 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
   std::vector<float> slope_x(n), slope_y(n), pixel_weight(n);
   const double m = options.min_normal_z;
   const double max_tangent = std::sqrt(1.0 - m * m);
+  const ViewParallax& parallax = options.parallax;
   ParallelFor(n, [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) {
       double nx = normal.data()[i], ny = normal.data()[n + i], nz = normal.data()[2 * n + i];
@@ -545,8 +550,18 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
         if (t > 0.0) nx *= max_tangent / t, ny *= max_tangent / t;
         nz = m;
       }
-      slope_x[i] = static_cast<float>(-nx / nz);
-      slope_y[i] = static_cast<float>(-ny / nz);
+      double sx = -nx / nz, sy = -ny / nz;
+      if (parallax.enabled) {
+        // The grid's slope of a surface seen along oblique rays (ViewParallax).
+        const double x = parallax.x0_mm + (static_cast<double>(i % w) + 0.5) * pitch_mm;
+        const double y = parallax.y1_mm - (static_cast<double>(i / w) + 0.5) * pitch_mm;
+        const double depth = parallax.camera_z_mm - parallax.plane_z_mm;
+        const double tx = (parallax.camera_x_mm - x) / depth, ty = (parallax.camera_y_mm - y) / depth;
+        const double stretch = std::max(1.0 - (sx * tx + sy * ty), parallax.min_stretch);
+        sx /= stretch, sy /= stretch;
+      }
+      slope_x[i] = static_cast<float>(sx);
+      slope_y[i] = static_cast<float>(sy);
       pixel_weight[i] = static_cast<float>(wgt);
     }
   });

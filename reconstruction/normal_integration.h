@@ -39,8 +39,28 @@ enum class Integrator { kDct, kRobust };
 std::string IntegratorName(Integrator integrator);
 Integrator ParseIntegrator(const std::string& name);
 
+// The camera the normals were seen from, for the parallax of its rays. A normal map rectified
+// onto the plane z = plane_z_mm holds at grid point (x, y) the normal of the surface point its
+// camera ray reaches, which lies (z - plane_z) t further toward the camera, t = the horizontal
+// offset per unit height of the ray (camera - point).xy / (camera.z - plane_z). So the height's
+// slope along the grid is g = s / (1 - s . t) for the surface's slope s = (-nx, -ny) / nz: facets
+// that face the camera are stretched over more grid pixels. Integrating s instead leans the height
+// toward the camera by about E[s^2] t, a bowl centred under it (docs/reconstruction.md,
+// "Parallax of the view"). Off (the default): the rays are taken as vertical.
+struct ViewParallax {
+  bool enabled = false;
+  double camera_x_mm = 0.0, camera_y_mm = 0.0, camera_z_mm = 0.0;  // the camera's centre, world frame
+  // The map's left edge (x) and top edge (y), world mm: pixel (c, r) is centred at
+  // (x0 + (c + 0.5) p, y1 - (r + 0.5) p); and the plane the map was rectified onto.
+  double x0_mm = 0.0, y1_mm = 0.0, plane_z_mm = 0.0;
+  // 1 - s . t is kept at least this: a facet seen nearly edge-on holds too few grid pixels to give
+  // its slope (0.2: the slope grows at most 5x).
+  double min_stretch = 0.2;
+};
+
 struct IntegrationOptions {
   Integrator method = Integrator::kDct;
+  ViewParallax parallax;
   // Pixel pitch in mm; 0 = take it from the normal map's Image::pitch_mm().
   double pitch_mm = 0.0;
   // Normals flatter than this n_z (or facing away) are clamped to it, bounding slopes at
