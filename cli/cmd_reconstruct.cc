@@ -6,9 +6,9 @@
 #include "cli/command.h"
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
+#include "pipeline/relief_registration.h"
 #include "pipeline/stages.h"
 #include "pipeline/supersampled_reconstruction.h"
-#include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
 #include "pipeline/view_parallax.h"
 

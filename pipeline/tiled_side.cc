@@ -212,16 +212,18 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     const MetricGrid& solve_grid = solved.grid();
     Image fine_height, fine_marks;
     if (fine_factor > 1 && height) fine_height = UpsampleLinear(*height, fine_factor);
-    const bool fine_heights_mark = fine_factor > 1 && marks_from == &shadow_height && !fine_shadow_height.empty();
-    if (fine_factor > 1 && marks_from && marks_from != height && !fine_heights_mark) {
-      fine_marks = UpsampleLinear(*marks_from, fine_factor);
-    }
     const Image* solve_height = fine_factor > 1 ? (height ? &fine_height : nullptr) : height;
-    const Image* marks = fine_factor > 1 ? (marks_from ? (fine_heights_mark          ? &fine_shadow_height
-                                                          : marks_from == height ? &fine_height
-                                                                                 : &fine_marks)
-                                                       : nullptr)
-                                         : marks_from;
+    const Image* marks = marks_from;
+    if (fine_factor > 1 && marks_from) {
+      if (marks_from == &shadow_height && !fine_shadow_height.empty()) {
+        marks = &fine_shadow_height;
+      } else if (marks_from == height) {
+        marks = &fine_height;
+      } else {
+        fine_marks = UpsampleLinear(*marks_from, fine_factor);
+        marks = &fine_marks;
+      }
+    }
     if (keep_fine && fine_factor > 1) {
       fine_first_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_first_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
@@ -464,15 +466,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (!geometry.photometric_stereo.height_mm.empty()) {
       fine_solve_height = UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
     }
-    if (!shadow_height.empty() && fine_shadow_height.empty()) fine_marks = UpsampleLinear(shadow_height, fine_factor);
+    // The fine heights' marks when they were integrated (distant lights), no longer needed otherwise.
+    if (!shadow_height.empty()) {
+      fine_marks = fine_shadow_height.empty() ? UpsampleLinear(shadow_height, fine_factor) : std::move(fine_shadow_height);
+    }
   }
   auto solve_fine_band = [&](int b, Stack* band) {
     *band = fine_bands.Build(frames, b);
-    if (!fine_shadow_height.empty()) {
-      mark(fine_shadow_height, fine_grid, band);
-    } else if (!fine_marks.empty()) {
-      mark(fine_marks, fine_grid, band);
-    }
+    if (!fine_marks.empty()) mark(fine_marks, fine_grid, band);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     return reconstruction::SolvePhotometricStereoAt(
         *band, ps_options,
