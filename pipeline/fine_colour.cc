@@ -11,16 +11,18 @@ FineColourAverage::FineColourAverage(int maps_width, int maps_height, int k)
   if (maps_width < 0 || maps_height < 0 || k < 1) throw std::invalid_argument("FineColourAverage: bad grid or factor");
   const std::size_t pixels = static_cast<std::size_t>(maps_width) * static_cast<std::size_t>(maps_height);
   sum_.assign(3 * pixels, 0.0f);
+  weight_.assign(pixels, 0.0f);
   count_.assign(pixels, 0);
 }
 
-void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, int fine_row0) {
+void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, int fine_row0, const Image& weights) {
   const int rows = base_color.height();
   if (base_color.channels() != 3 || cluster_id.channels() != 1 || base_color.width() != width_ * k_ ||
       cluster_id.width() != base_color.width() || cluster_id.height() != rows || fine_row0 < 0 ||
-      fine_row0 + rows > height_ * k_) {
+      fine_row0 + rows > height_ * k_ ||
+      (!weights.empty() && (weights.channels() != 1 || weights.width() != base_color.width() || weights.height() != rows))) {
     throw std::invalid_argument("FineColourAverage::Add: rows " + std::to_string(fine_row0) + " + " +
-                                std::to_string(rows) + " of 3-channel colour and 1-channel cluster ids, " +
+                                std::to_string(rows) + " of 3-channel colour, 1-channel cluster ids and weights, " +
                                 std::to_string(width_ * k_) + " wide, must lie on the fine grid (" +
                                 std::to_string(width_ * k_) + " x " + std::to_string(height_ * k_) + ")");
   }
@@ -30,10 +32,13 @@ void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, in
       if (!(cluster_id.at(0, r, c) >= 0.0f)) continue;
       const float red = base_color.at(0, r, c), green = base_color.at(1, r, c), blue = base_color.at(2, r, c);
       if (!std::isfinite(red) || !std::isfinite(green) || !std::isfinite(blue)) continue;
+      const float weight = weights.empty() ? 1.0f : weights.at(0, r, c);
+      if (!(weight > 0.0f) || !std::isfinite(weight)) continue;
       const std::size_t i = map_row + static_cast<std::size_t>(c / k_);
-      sum_[3 * i] += red;
-      sum_[3 * i + 1] += green;
-      sum_[3 * i + 2] += blue;
+      sum_[3 * i] += weight * red;
+      sum_[3 * i + 1] += weight * green;
+      sum_[3 * i + 2] += weight * blue;
+      weight_[i] += weight;
       ++count_[i];
     }
   }
@@ -50,7 +55,7 @@ long long FineColourAverage::ApplyTo(const Image& maps_cluster_id, Image* maps_b
     for (int c = 0; c < width_; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(c);
       if (count_[i] == 0 || !(maps_cluster_id.at(0, r, c) >= 0.0f)) continue;
-      for (int ch = 0; ch < 3; ++ch) maps_base_color->at(ch, r, c) = sum_[3 * i + ch] / static_cast<float>(count_[i]);
+      for (int ch = 0; ch < 3; ++ch) maps_base_color->at(ch, r, c) = sum_[3 * i + ch] / weight_[i];
       ++set;
     }
   }

@@ -12,7 +12,7 @@
 // from the finer grid"). The price: rendered with its one normal, the map pixel is brighter than
 // its facets' mean in the crevices (the held-out re-render moves the other way).
 //
-// Accumulates in map pixels (16 B each), so the banded pipeline adds one fine band at a time
+// Accumulates in map pixels (20 B each), so the banded pipeline adds one fine band at a time
 // without holding a fine colour map.
 
 #include <cstddef>
@@ -31,11 +31,13 @@ class FineColourAverage {
   // Adds fine rows [fine_row0, fine_row0 + base_color.height()) of the fine grid: `base_color` (3
   // channels, linear RGB) and `cluster_id` (1 channel) of the fit's per-pixel step on them, as wide
   // as the fine grid (maps_width k). Only fitted pixels count: cluster id >= 0 and a finite colour.
-  // Throws std::invalid_argument when the rows do not lie on the fine grid.
-  void Add(const Image& base_color, const Image& cluster_id, int fine_row0);
+  // `weights` (1 channel, the rows' size; empty: all 1) weigh each fine pixel, e.g. its share of
+  // the surface seen along the camera's rays (fine_grid.h SurfaceAreaWeights); a pixel of weight 0
+  // does not count. Throws std::invalid_argument when the rows do not lie on the fine grid.
+  void Add(const Image& base_color, const Image& cluster_id, int fine_row0, const Image& weights = Image());
 
   // Sets the base colour of every map pixel that the maps' fit fitted (`maps_cluster_id` >= 0) and
-  // that has at least one fitted fine pixel to the mean of its fitted fine pixels; the others keep
+  // that has at least one fitted fine pixel to the (weighted) mean of its fitted fine pixels; the others keep
   // theirs. Returns the number of map pixels set. Throws std::invalid_argument when the maps are not
   // on the maps' grid.
   long long ApplyTo(const Image& maps_cluster_id, Image* maps_base_color) const;
@@ -43,6 +45,7 @@ class FineColourAverage {
  private:
   int width_, height_, k_;
   std::vector<float> sum_;            // 3 per map pixel, linear RGB
+  std::vector<float> weight_;         // their summed weights per map pixel
   std::vector<std::int32_t> count_;   // fitted fine pixels per map pixel
 };
 

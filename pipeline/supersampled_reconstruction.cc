@@ -105,7 +105,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   const reconstruction::PhotometricStereoResult& f = fine_side.photometric_stereo;
   start = StageClock();
   SideReconstruction out;
-  out.photometric_stereo = AveragePhotometricStereoOntoMaps(f, k, grid.pitch_mm);
+  out.photometric_stereo = AveragePhotometricStereoOntoMaps(f, k, grid.pitch_mm, options.integration.parallax);
   double solve_seconds = 0.0;
   for (const StepRecord& s : fine_report.steps) {
     if (s.name.rfind("photometric stereo", 0) == 0 || s.name == "cast shadows") solve_seconds += s.seconds;
@@ -148,10 +148,12 @@ Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, c
   integration.pitch_mm = maps_pitch / k;
   fine_normals.set_pitch_mm(integration.pitch_mm);
   const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
+  // Each fine height is the height of the point seen there: weighted by its share of the surface.
+  const Image weights = SurfaceAreaWeights(fine_normals, integration.parallax);
   fine_normals = Image();
   integration.pitch_mm = maps_pitch;
   const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
-  return HeightFromFineAndMapsGrids(fine_height, maps_height, k);
+  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, weights);
 }
 
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
@@ -182,16 +184,18 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
     fitting::PixelTally fine_tally;
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
+    // Each fine pixel weighted by its share of the surface seen along the camera's rays (fine_grid.h).
+    const Image weights = SurfaceAreaWeights(fine_fit.normals, options.integration.parallax);
     // The base colour from the fine pixels' own (fine_colour.h: a map pixel's spread of facet
     // normals reads as a darker colour on the maps' grid).
     if (options.base_colour_from_fine_grid) {
       FineColourAverage colour(stack.grid.width, stack.grid.height, k);
-      colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0);
+      colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0, weights);
       colour.ApplyTo(fit.cluster_id, &fit.base_color);
     }
     if (!fine_fit.normals.empty()) {
       Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
-      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm);
+      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights);
       if (fine_height_mm) {
         *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, fit_normals_on_grid,
                                                       geometry.valid, k, HasPointLights(stack), options, progress);

@@ -94,7 +94,8 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
 // The height of normals refined on the fine grid (`fine_normals`, its `fine_valid`; consumed) and
 // on the maps' grid (`maps_normals`, its pitch the maps', `maps_valid`): each integrated with
 // AdoptFittedNormals' integrator (`near`: the near-light one) and joined by
-// HeightFromFineAndMapsGrids. FitSideWithFineNormals' height, and the banded path's.
+// HeightFromFineAndMapsGrids (the fine heights weighted by SurfaceAreaWeights when the
+// integration's parallax is on). FitSideWithFineNormals' height, and the banded path's.
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& maps_normals,
                                   const Image& maps_valid, int k, bool near, const StageOptions& options,
                                   const ProgressCallback& progress = {});

@@ -246,7 +246,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         PasteRows(band_ps.normal, solved.Row0(b), &fine_first_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_first_confidence);
       }
-      if (fine_factor > 1) band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm);
+      if (fine_factor > 1) {
+        band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm, options.integration.parallax,
+                                                   solved.Row0(b));
+      }
       PasteBand(band_ps, bands.Row0(b), &full);
       solve_seconds += StageClock() - start;
       ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
@@ -538,12 +541,17 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
                             &band_fit, &fine_tally);
       PasteRows(band_fit.normals, row0, &fine_normals);
-      if (options.base_colour_from_fine_grid) colour.Add(band_fit.base_color, band_fit.cluster_id, row0);
+      if (options.base_colour_from_fine_grid) {
+        // Each fine pixel weighted by its share of the surface seen along the camera's rays (fine_grid.h).
+        colour.Add(band_fit.base_color, band_fit.cluster_id, row0,
+                   SurfaceAreaWeights(band_fit.normals, options.integration.parallax, row0));
+      }
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
     const Image maps_normals = std::move(out.fit.normals);  // refined on the maps' grid: the long wavelengths
-    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm);
+    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm,
+                                             SurfaceAreaWeights(fine_normals, options.integration.parallax));
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),
                                               maps_normals, geometry.valid, fine_factor, near, options, progress);
     fine_fit_seconds = StageClock() - fine_start;

@@ -32,6 +32,15 @@ bool IntegrationOptions::Check() const {
                                 std::isfinite(parallax.y1_mm)));
 }
 
+double ParallaxStretch(const ViewParallax& parallax, double pitch_mm, int col, int row, double slope_x, double slope_y) {
+  if (!parallax.enabled) return 1.0;
+  const double x = parallax.x0_mm + (static_cast<double>(col) + 0.5) * pitch_mm;
+  const double y = parallax.y1_mm - (static_cast<double>(row) + 0.5) * pitch_mm;
+  const double depth = parallax.camera_z_mm - parallax.plane_z_mm;
+  const double tx = (parallax.camera_x_mm - x) / depth, ty = (parallax.camera_y_mm - y) / depth;
+  return std::max(1.0 - (slope_x * tx + slope_y * ty), parallax.min_stretch);
+}
+
 namespace {
 
 // Lengths whose prime factors are all at most this go straight to kissfft; longer prime factors
@@ -553,11 +562,7 @@ IntegrationResult IntegrateNormals(const Image& normal, const Image& mask, const
       double sx = -nx / nz, sy = -ny / nz;
       if (parallax.enabled) {
         // The grid's slope of a surface seen along oblique rays (ViewParallax).
-        const double x = parallax.x0_mm + (static_cast<double>(i % w) + 0.5) * pitch_mm;
-        const double y = parallax.y1_mm - (static_cast<double>(i / w) + 0.5) * pitch_mm;
-        const double depth = parallax.camera_z_mm - parallax.plane_z_mm;
-        const double tx = (parallax.camera_x_mm - x) / depth, ty = (parallax.camera_y_mm - y) / depth;
-        const double stretch = std::max(1.0 - (sx * tx + sy * ty), parallax.min_stretch);
+        const double stretch = ParallaxStretch(parallax, pitch_mm, static_cast<int>(i % w), static_cast<int>(i / w), sx, sy);
         sx /= stretch, sy /= stretch;
       }
       slope_x[i] = static_cast<float>(sx);

@@ -58,6 +58,13 @@ struct ViewParallax {
   double min_stretch = 0.2;
 };
 
+// The stretch 1 - s . t (ViewParallax) at the centre of pixel (col, row) of a map of pitch
+// `pitch_mm` on the parallax's grid, for a surface of slope s = (slope_x, slope_y) (mm per mm),
+// kept at least min_stretch; 1 when the parallax is off. A grid pixel holds 1 / stretch of its
+// area of the surface's plan: the weight that turns a mean over grid pixels into the mean over the
+// surface (pipeline/fine_grid.h AverageNormalsOntoMaps).
+double ParallaxStretch(const ViewParallax& parallax, double pitch_mm, int col, int row, double slope_x, double slope_y);
+
 struct IntegrationOptions {
   Integrator method = Integrator::kDct;
   ViewParallax parallax;

@@ -95,6 +95,27 @@ TEST(FineColourAverage, BandsGiveTheWholeGridsMeans) {
   EXPECT_NEAR(b.at(0, 1, 0), 2.5f / 16.0f, kExact);
 }
 
+TEST(FineColourAverage, WeightsMakeTheMeanAWeightedOne) {
+  // Map pixel (0, 0) of fine rows 0-1, columns 0-1: red = row / 16, weights 3 on row 0 and 1 on row 1
+  // give (3 * 0 + 1 * 1) / 4 / 16 for a plain mean's 0.5 / 16; a weight of 0 leaves a pixel out.
+  const FineFit fine(1, 1);
+  Image weights(2, 2, 1, 3.0f);
+  weights.at(0, 1, 0) = weights.at(0, 1, 1) = 1.0f;
+  FineColourAverage average(1, 1, kFactor);
+  average.Add(fine.base_color, fine.cluster_id, 0, weights);
+  Image maps(1, 1, 3, 0.5f);
+  ASSERT_EQ(average.ApplyTo(Image(1, 1, 1, 0.0f), &maps), 1);
+  EXPECT_NEAR(maps.at(0, 0, 0), 0.25f / 16.0f, kExact);
+  EXPECT_NEAR(maps.at(1, 0, 0), 0.5f / 16.0f, kExact);  // columns 0 and 1, equal weight within each row
+
+  weights.at(0, 0, 0) = weights.at(0, 0, 1) = 0.0f;  // only row 1 counts
+  FineColourAverage row_one(1, 1, kFactor);
+  row_one.Add(fine.base_color, fine.cluster_id, 0, weights);
+  ASSERT_EQ(row_one.ApplyTo(Image(1, 1, 1, 0.0f), &maps), 1);
+  EXPECT_NEAR(maps.at(0, 0, 0), 1.0f / 16.0f, kExact);
+  EXPECT_THROW(row_one.Add(fine.base_color, fine.cluster_id, 0, Image(2, 1, 1, 1.0f)), std::invalid_argument);
+}
+
 TEST(FineColourAverage, RowsOffTheFineGridAreRefused) {
   FineColourAverage average(2, 2, kFactor);
   EXPECT_THROW(average.Add(Image(4, 2, 3, 0.0f), Image(4, 2, 1, 0.0f), 3), std::invalid_argument);  // rows 3-4 of 4
