@@ -330,6 +330,17 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
     for (const auto& preset : presets) add({"velvet", "oblique", base, 0, true, preset, "", "", "matrix", "", ""});
     add({"velvet_bumps", "oblique", base, 0, true, "balanced", "", "", "matrix", "", ""});
   }
+  // Model mismatch: the velvet rendered with the synthetic scanner's second reflectance model
+  // (Charlie sheen, datasets_synthetic/renderer.h) and fitted with the Principled BRDF, beside the
+  // Principled velvet of the same rig and preset (the "report the same figures"). Full:
+  // every rig, balanced; quick: the distant rig, fast.
+  if (quick) {
+    add({"velvet_mismatch", "distant", base, 0, true, "fast", "", "", "model-mismatch", "", ""});
+  } else {
+    for (const char* rig : {"distant", "near", "oblique"}) {
+      add({"velvet_mismatch", rig, base, 0, true, "balanced", "", "", "model-mismatch", "", ""});
+    }
+  }
   // Methods on the same captures: ls vs robust photometric stereo, dct vs robust integration,
   // clusters vs per-pixel fitting, against the balanced run (robust + dct + per-pixel).
   for (const char* rig : {"distant", "near"}) {
@@ -397,7 +408,7 @@ std::vector<std::string> BenchCsvColumns() {
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
           "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"};
+          "anisotropic_err", "metallic_err", "rerender_rel_rmse", "rerender_truth_maps_rel_rmse", "held_out_rel_rmse", "unreliable", "error"};
 }
 
 void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
@@ -421,6 +432,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
         optional(e.height_levelled_rmse_percent, 2)};
     for (int p = 0; p < 7; ++p) cells.push_back(ParameterCell(r, p));
     cells.push_back(v(e.rerender_relative_rmse, 4));
+    cells.push_back(v(e.rerender_truth_maps_relative_rmse, 4));
     cells.push_back(optional(r.held_out_rmse, 4));
     cells.push_back(Join(r.unreliable, "; "));
     cells.push_back(r.error);
@@ -532,10 +544,33 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       << " | " << (all ? Fixed(100.0 * all->evaluation.rerender_relative_rmse, 2) : std::string("-")) << " |\n";
   }
 
+  // Model mismatch, against the Principled velvet of the same rig and preset.
+  s << "\n## Model mismatch (velvet rendered with Charlie sheen, fitted with the Principled BRDF)\n\n| capture | "
+       "preset | normal mean deg | base dE | roughness err | specular err | sheen err | re-render % | flagged unreliable | "
+       "Principled velvet: roughness err | specular err | sheen err | re-render % |\n"
+       "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const BenchRow& r : rows) {
+    if (r.c.group != "model-mismatch" || r.status != "ok") continue;
+    BenchCase principled = r.c;
+    principled.scene = "velvet";
+    const BenchRow* same = find(principled.CaptureId(), r.c.preset);
+    const Evaluation& e = r.evaluation;
+    s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << Fixed(e.normal_mean_deg, 2) << " | "
+      << Fixed(e.base_color_de_mean, 2) << " | " << ParameterCell(r, 0) << " | " << ParameterCell(r, 1) << " | "
+      << ParameterCell(r, 3) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " | " << Join(r.unreliable, "; ")
+      << " | ";
+    if (same) {
+      s << ParameterCell(*same, 0) << " | " << ParameterCell(*same, 1) << " | " << ParameterCell(*same, 3) << " | "
+        << Fixed(100.0 * same->evaluation.rerender_relative_rmse, 2) << " |\n";
+    } else {
+      s << "- | - | - | - |\n";
+    }
+  }
+
   // Camera finer than the maps, against the 1x matrix run of the same scene and preset.
   s << "\n## Camera finer than the maps (footprint pre-filter)\n\n| capture | camera px per map px | photometric stereo grid | "
-       "level | preset | total s | normal mean / p95 deg | albedo dE | height % | re-render % | at 1x: normal mean / p95 deg | height % | "
-       "re-render % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+       "level | preset | total s | normal mean / p95 deg | albedo dE | height % | re-render % | truth's own maps re-render % | "
+       "at 1x: normal mean / p95 deg | height % | re-render % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "camera-finer" || r.status != "ok") continue;
     BenchCase one = r.c;
@@ -546,7 +581,8 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       << (r.c.ps_supersample == 1 ? "maps'" : "camera's (--ps-supersample 0)") << " | " << r.c.level << " | " << r.c.preset << " | "
       << Fixed(r.total_s, 2) << " | "
       << Fixed(e.normal_mean_deg, 2) << " / " << Fixed(e.normal_p95_deg, 2) << " | " << Fixed(e.albedo_de_mean, 2) << " | "
-      << Fixed(e.height_rmse_percent, 1) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " | ";
+      << Fixed(e.height_rmse_percent, 1) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " | "
+      << Fixed(100.0 * e.rerender_truth_maps_relative_rmse, 2) << " | ";
     if (at_1x) {
       const Evaluation& a = at_1x->evaluation;
       s << Fixed(a.normal_mean_deg, 2) << " / " << Fixed(a.normal_p95_deg, 2) << " | " << Fixed(a.height_rmse_percent, 1) << " | "

@@ -70,6 +70,12 @@ struct Evaluation {
   // straight above; the truth in the scene's fibre frame, the fit in the fitter's (+x projected).
   int held_out_lights = 0;
   double rerender_relative_rmse = 0;
+  // The same figure for the truth's own maps on the output grid (each pixel's footprint-mean
+  // parameters and unit normal, rendered as one pixel): what a material of one normal and one set
+  // of parameters per map pixel reaches at best. 0 when the output is not coarser than the truth
+  // (the truth is then interpolated, and rendered as such); on a coarser output a pixel's facets
+  // render differently from their mean, and rerender_relative_rmse cannot go below this.
+  double rerender_truth_maps_relative_rmse = 0;
 };
 
 // Throws InputError naming the file and field when OUTPUT or TRUTH cannot be used.

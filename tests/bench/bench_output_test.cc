@@ -3,6 +3,7 @@
 // the issue asks (every preset, distant/near/oblique, both methods, a capture that needs less).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <unistd.h>
@@ -156,8 +157,9 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   const auto cases = BenchMatrix(options);
   std::set<std::string> presets, rigs, solvers, integrators, fit_modes, ids;
   bool without_calibration = false;
-  int held_out = 0, camera_finer = 0, camera_grid_ps = 0, quadratic = 0;
+  int held_out = 0, camera_finer = 0, camera_grid_ps = 0, quadratic = 0, mismatch = 0;
   for (const auto& c : cases) {
+    mismatch += c.group == "model-mismatch" && c.scene == "velvet_mismatch";
     held_out += !c.hold_out_lights.empty() && c.group == "held-out";
     camera_finer += c.group == "camera-finer" && c.camera_per_map == 2;
     camera_grid_ps += c.group == "camera-finer" && c.ps_supersample == 0;
@@ -186,6 +188,10 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
       << "a camera at twice the maps' dpi, photometric stereo on the maps' grid and on the camera's (levelled both ways)";
   EXPECT_EQ(camera_grid_ps, 2) << "two runs with --ps-supersample 0";
   EXPECT_EQ(quadratic, 1) << "one of them with --level quadratic";
+  EXPECT_EQ(mismatch, 1) << "the velvet of the second reflectance model, beside the Principled velvet's matrix run";
+  EXPECT_EQ(std::count_if(cases.begin(), cases.end(),
+                          [](const BenchCase& c) { return c.RunId() == "velvet_distant_48_fast" && c.group == "matrix"; }),
+            1);
   options.quick = false;
   EXPECT_GT(BenchMatrix(options).size(), cases.size());
 }

@@ -15,7 +15,8 @@ EXPECTED_COLUMNS = [
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
     "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
-    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "held_out_rel_rmse", "unreliable", "error"]
+    "anisotropic_err", "metallic_err", "rerender_rel_rmse", "rerender_truth_maps_rel_rmse", "held_out_rel_rmse", "unreliable",
+    "error"]
 PLOTS = ["error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"]
 
 
@@ -63,9 +64,14 @@ def main():
         fail(f"held-out run missing or its held_out_rel_rmse out of range: {held_out}")
     if any(r["held_out_rel_rmse"] for r in records if r["group"] != "held-out"):
         fail("held_out_rel_rmse filled for a run that held no light out")
+    # The truth's own maps re-render as the truth on its own grid, and not on a coarser one.
+    if any(float(r["rerender_truth_maps_rel_rmse"]) != 0.0 for r in records if r["camera_per_map"] == "1"):
+        fail("rerender_truth_maps_rel_rmse not 0 for a run on the truth's own grid")
     finer = [r for r in records if r["group"] == "camera-finer"]
     if not finer or any(int(r["camera_per_map"]) < 2 for r in finer):
         fail(f"camera-finer run missing or its camera_per_map below 2: {finer}")
+    if not all(float(r["rerender_truth_maps_rel_rmse"]) > 0.0 for r in finer):
+        fail(f"rerender_truth_maps_rel_rmse 0 on a grid coarser than the truth: {finer}")
     if any(r["camera_per_map"] != "1" for r in records if r["group"] != "camera-finer"):
         fail("camera_per_map other than 1 outside the camera-finer group")
     if sorted((r["ps_supersample"], r["level"]) for r in finer) != [("0", "plane"), ("0", "quadratic"), ("1", "plane")]:
@@ -81,10 +87,17 @@ def main():
         # The same sample on the same 300 dpi grid: the finer camera must not change the map's size.
         if same and abs(float(same["megapixels"]) - float(r["megapixels"])) > 0.1 * float(same["megapixels"]):
             fail(f"camera-finer map size {r['megapixels']} MP differs from the 1x run's {same['megapixels']} MP")
+    mismatch = [r for r in records if r["group"] == "model-mismatch"]
+    if [r["scene"] for r in mismatch] != ["velvet_mismatch"]:
+        fail(f"one model-mismatch run (velvet_mismatch) expected: {mismatch}")
     md = (out / "bench.md").read_text()
+    # Its row in the mismatch table, beside the Principled velvet of the same rig and preset.
+    if "| velvet_mismatch_distant_48 | fast |" not in md or "velvet_distant_48_fast" not in {
+            r["scene"] + "_" + r["rig"] + "_" + r["size_px"] + "_" + r["preset"] for r in records}:
+        fail("bench.md lacks the model-mismatch row or its Principled velvet run")
     for heading in ("## Every run", "## Presets", "## Methods on the same capture",
                     "### Fit: clusters vs per-pixel", "## Held-out photographs", "## Camera finer than the maps",
-                    "## Scenes that need less"):
+                    "## Scenes that need less", "## Model mismatch"):
         if heading not in md:
             fail(f"bench.md lacks {heading}")
     for plot in PLOTS:
