@@ -71,10 +71,11 @@ struct Evaluation {
   int held_out_lights = 0;
   double rerender_relative_rmse = 0;
   // The same figure for the truth's own maps on the output grid (each pixel's footprint-mean
-  // parameters and unit normal, rendered as one pixel): what a material of one normal and one set
-  // of parameters per map pixel reaches at best. 0 when the output is not coarser than the truth
-  // (the truth is then interpolated, and rendered as such); on a coarser output a pixel's facets
-  // render differently from their mean, and rerender_relative_rmse cannot go below this.
+  // parameters and unit normal, rendered as one pixel): what a material holding the truth's means
+  // reaches. 0 when the output is not coarser than the truth (the truth is then interpolated, and
+  // rendered as such); on a coarser output a pixel's facets render otherwise than their mean. Not
+  // a lower bound: a material fitted to the pixel's appearance can come closer (plain at 3x: 5.66
+  // against 7.35 %, docs/fitting.md "The truth's own maps under held-out lights").
   double rerender_truth_maps_relative_rmse = 0;
 };
 
