@@ -12,7 +12,6 @@ FineColourAverage::FineColourAverage(int maps_width, int maps_height, int k)
   const std::size_t pixels = static_cast<std::size_t>(maps_width) * static_cast<std::size_t>(maps_height);
   sum_.assign(3 * pixels, 0.0f);
   weight_.assign(pixels, 0.0f);
-  count_.assign(pixels, 0);
 }
 
 void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, int fine_row0, const Image& weights) {
@@ -39,7 +38,6 @@ void FineColourAverage::Add(const Image& base_color, const Image& cluster_id, in
       sum_[3 * i + 1] += weight * green;
       sum_[3 * i + 2] += weight * blue;
       weight_[i] += weight;
-      ++count_[i];
     }
   }
 }
@@ -54,7 +52,7 @@ long long FineColourAverage::ApplyTo(const Image& maps_cluster_id, Image* maps_b
   for (int r = 0; r < height_; ++r) {
     for (int c = 0; c < width_; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(c);
-      if (count_[i] == 0 || !(maps_cluster_id.at(0, r, c) >= 0.0f)) continue;
+      if (!(weight_[i] > 0.0f) || !(maps_cluster_id.at(0, r, c) >= 0.0f)) continue;
       for (int ch = 0; ch < 3; ++ch) maps_base_color->at(ch, r, c) = sum_[3 * i + ch] / weight_[i];
       ++set;
     }

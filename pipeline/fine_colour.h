@@ -12,11 +12,10 @@
 // from the finer grid"). The price: rendered with its one normal, the map pixel is brighter than
 // its facets' mean in the crevices (the held-out re-render moves the other way).
 //
-// Accumulates in map pixels (20 B each), so the banded pipeline adds one fine band at a time
+// Accumulates in map pixels (16 B each), so the banded pipeline adds one fine band at a time
 // without holding a fine colour map.
 
 #include <cstddef>
-#include <cstdint>
 #include <vector>
 
 #include "core/image.h"
@@ -45,8 +44,7 @@ class FineColourAverage {
  private:
   int width_, height_, k_;
   std::vector<float> sum_;            // 3 per map pixel, linear RGB
-  std::vector<float> weight_;         // their summed weights per map pixel
-  std::vector<std::int32_t> count_;   // fitted fine pixels per map pixel
+  std::vector<float> weight_;         // summed weights of its fitted fine pixels (0: none), per map pixel
 };
 
 }  // namespace u3mscan

@@ -139,21 +139,20 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   return out;
 }
 
-Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& maps_normals,
-                                  const Image& maps_valid, int k, bool near, const StageOptions& options,
-                                  const ProgressCallback& progress) {
+Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
+                                  const Image& maps_normals, const Image& maps_valid, int k, bool near,
+                                  const StageOptions& options, const ProgressCallback& progress) {
   // AdoptFittedNormals' integrator (also for near lights), on each grid.
   reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
   const double maps_pitch = maps_normals.pitch_mm();
   integration.pitch_mm = maps_pitch / k;
   fine_normals.set_pitch_mm(integration.pitch_mm);
   const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
-  // Each fine height is the height of the point seen there: weighted by its share of the surface.
-  const Image weights = SurfaceAreaWeights(fine_normals, integration.parallax);
   fine_normals = Image();
   integration.pitch_mm = maps_pitch;
   const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
-  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, weights);
+  // Each fine height is the height of the point seen there: weighted by its share of the surface.
+  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights);
 }
 
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
@@ -197,8 +196,9 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
       Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
       fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights);
       if (fine_height_mm) {
-        *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, fit_normals_on_grid,
-                                                      geometry.valid, k, HasPointLights(stack), options, progress);
+        *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, weights,
+                                                      fit_normals_on_grid, geometry.valid, k, HasPointLights(stack),
+                                                      options, progress);
       }
     }
   }

@@ -94,11 +94,12 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
 // The height of normals refined on the fine grid (`fine_normals`, its `fine_valid`; consumed) and
 // on the maps' grid (`maps_normals`, its pitch the maps', `maps_valid`): each integrated with
 // AdoptFittedNormals' integrator (`near`: the near-light one) and joined by
-// HeightFromFineAndMapsGrids (the fine heights weighted by SurfaceAreaWeights when the
-// integration's parallax is on). FitSideWithFineNormals' height, and the banded path's.
-Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& maps_normals,
-                                  const Image& maps_valid, int k, bool near, const StageOptions& options,
-                                  const ProgressCallback& progress = {});
+// HeightFromFineAndMapsGrids, the fine heights weighted by `fine_weights` (SurfaceAreaWeights of
+// `fine_normals`, which the caller has already made for their average; empty: all 1).
+// FitSideWithFineNormals' height, and the banded path's.
+Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
+                                  const Image& maps_normals, const Image& maps_valid, int k, bool near,
+                                  const StageOptions& options, const ProgressCallback& progress = {});
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
 // the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the

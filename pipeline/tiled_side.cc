@@ -533,6 +533,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
     FineColourAverage colour(grid.width, grid.height, fine_factor);  // fine_colour.h
+    // Each fine pixel's share of the surface seen along the camera's rays (fine_grid.h), band by
+    // band, for the colour, the normals' average and the fine heights (empty: the parallax is off).
+    const reconstruction::ViewParallax& parallax = options.integration.parallax;
+    Image fine_weights;
+    if (parallax.enabled) fine_weights = Image(fine_grid.width, fine_grid.height, 1, 1.0f, fine_grid.pitch_mm);
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
       const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
@@ -541,19 +546,17 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
                             &band_fit, &fine_tally);
       PasteRows(band_fit.normals, row0, &fine_normals);
-      if (options.base_colour_from_fine_grid) {
-        // Each fine pixel weighted by its share of the surface seen along the camera's rays (fine_grid.h).
-        colour.Add(band_fit.base_color, band_fit.cluster_id, row0,
-                   SurfaceAreaWeights(band_fit.normals, options.integration.parallax, row0));
-      }
+      const Image band_weights = SurfaceAreaWeights(band_fit.normals, parallax, row0);
+      if (!band_weights.empty()) PasteRows(band_weights, row0, &fine_weights);
+      if (options.base_colour_from_fine_grid) colour.Add(band_fit.base_color, band_fit.cluster_id, row0, band_weights);
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
     const Image maps_normals = std::move(out.fit.normals);  // refined on the maps' grid: the long wavelengths
-    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm,
-                                             SurfaceAreaWeights(fine_normals, options.integration.parallax));
+    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm, fine_weights);
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),
-                                              maps_normals, geometry.valid, fine_factor, near, options, progress);
+                                              fine_weights, maps_normals, geometry.valid, fine_factor, near, options,
+                                              progress);
     fine_fit_seconds = StageClock() - fine_start;
   }
   out.fit.times.total_s = StageClock() - start;
