@@ -192,30 +192,35 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // there), not from the maps' heights taken there bilinearly, which are too smooth to place the
   // shadows of a yarn's wall (plain at 3x in 3 bands: normals 1.27 -> 1.13 deg, base colour dE
   // 0.92 -> 0.49; one band 1.14 and 0.50; docs/process.md). The first sweep keeps the fine unit normals and confidence
-  // for it (16 B a fine pixel, released once integrated).
+  // for it (16 B a fine pixel, released once integrated). Near lights refined on the finer grid do
+  // the same every round (below, "Near point lights").
   Image fine_shadow_height;
-  Image fine_first_normal, fine_first_confidence;
+  Image fine_last_normal, fine_last_confidence;
 
   // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
   // cast shadows marked from the whole-map heights `marks_from` (nullptr: none). With a fine factor
   // the bands are the fine grid's, the heights taken there bilinearly (the marks from
   // fine_shadow_height instead when it is set and `marks_from` is shadow_height), and each band's
   // result averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be
-  // null (the sample is on the maps' grid: a sweep of its own gathers it). `keep_fine`: the fine
-  // bands' normals and confidence are also pasted into fine_first_normal and fine_first_confidence.
+  // null (the sample is on the maps' grid: a sweep of its own gathers it). `fine_heights` (on the
+  // fine grid; nullptr: none) replaces `height` there, and `marks_from` too when that is `height`.
+  // `keep_fine`: the fine bands' normals and confidence are also pasted into fine_last_normal and
+  // fine_last_confidence.
   Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
-                         bool keep_fine = false) {
+                         bool keep_fine = false, const Image* fine_heights = nullptr) {
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
     Bands& solved = fine_factor > 1 ? fine_bands : bands;
     const MetricGrid& solve_grid = solved.grid();
     Image fine_height, fine_marks;
-    if (fine_factor > 1 && height) fine_height = UpsampleLinear(*height, fine_factor);
-    const Image* solve_height = fine_factor > 1 ? (height ? &fine_height : nullptr) : height;
+    if (fine_factor > 1 && height && !fine_heights) fine_height = UpsampleLinear(*height, fine_factor);
+    const Image* solve_height = fine_factor > 1 ? (height ? (fine_heights ? fine_heights : &fine_height) : nullptr) : height;
     const Image* marks = marks_from;
     if (fine_factor > 1 && marks_from) {
-      if (marks_from == &shadow_height && !fine_shadow_height.empty()) {
+      if (marks_from == height && fine_heights) {
+        marks = fine_heights;
+      } else if (marks_from == &shadow_height && !fine_shadow_height.empty()) {
         marks = &fine_shadow_height;
       } else if (marks_from == height) {
         marks = &fine_height;
@@ -224,9 +229,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         marks = &fine_marks;
       }
     }
-    if (keep_fine && fine_factor > 1) {
-      fine_first_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
-      fine_first_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
+    if (keep_fine && fine_factor > 1 && fine_last_normal.empty()) {
+      fine_last_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
+      fine_last_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
     }
     for (int b = 0; b < solved.count(); ++b) {
       Stack band = solved.Build(frames, b);
@@ -243,8 +248,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                                solve_grid.pitch_mm);
       PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
       if (keep_fine && fine_factor > 1) {
-        PasteRows(band_ps.normal, solved.Row0(b), &fine_first_normal);
-        PasteRows(band_ps.confidence, solved.Row0(b), &fine_first_confidence);
+        PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
+        PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
       }
       if (fine_factor > 1) {
         band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm, options.integration.parallax,
@@ -287,9 +292,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     keep_checked_frames();
   }
   // Fine bands of distant lights whose shadows are marked: the first solve's fine normals kept
-  // for the fine heights (fine_shadow_height above). The sample, and so the lights, are known.
-  const bool keep_fine_normals = fine_factor > 1 && options.mark_cast_shadows &&
-                                 !(HasPointLights(out.sample) && ps_options.refine_height);
+  // for the fine heights (fine_shadow_height above). Near lights refined on fine bands: every
+  // sweep's, for the next round's heights. The sample, and so the lights, are known.
+  const bool fine_near_rounds = fine_factor > 1 && HasPointLights(out.sample) && ps_options.refine_height;
+  const bool keep_fine_normals = fine_factor > 1 && (fine_near_rounds || options.mark_cast_shadows);
   if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
@@ -319,18 +325,19 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     integration.pitch_mm = grid.pitch_mm;
     const double start = StageClock();
     shadow_height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
-    if (!fine_first_normal.empty()) {
+    if (!fine_last_normal.empty()) {
       integration.pitch_mm = fine_calibration.grid.pitch_mm;
       fine_shadow_height =
-          reconstruction::IntegrateNormals(fine_first_normal, fine_first_confidence, integration).height_mm;
-      fine_first_normal = Image();
-      fine_first_confidence = Image();
+          reconstruction::IntegrateNormals(fine_last_normal, fine_last_confidence, integration).height_mm;
+      fine_last_normal = Image();
+      fine_last_confidence = Image();
     }
     shadow_seconds += StageClock() - start;
     ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)");
   }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
+  Image fine_near_height;  // on fine bands: the kept round's heights on the fine grid (else empty)
   bool near_rounds_capped = false;
   int near_round_limit = ps_options.max_near_iterations;
   if (near && ps_options.refine_height) {
@@ -349,18 +356,39 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     round_options.max_near_iterations = max_rounds;
     // Each solve is one sweep of every band, marked from the round's heights; a rejected round
     // gives back the kept round's shadow counts (the bands are marked again below).
+    // On fine bands the round's heights are integrated on the whole fine grid from the last sweep's
+    // fine normals, as one band integrates its fine stack's, and the fine bands are solved and
+    // marked at them: the maps' heights taken there bilinearly are too smooth for a yarn's walls
+    // (plain on the near rig at 3x in 3 bands: normals 1.297 -> 1.154 deg, base colour dE 1.17 ->
+    // 0.76; one band 1.157 and 0.83; docs/process.md). The loop itself (integration, convergence) stays on the
+    // maps' grid. 24 B a fine pixel while it runs: the fine normals, confidence and two heights.
+    reconstruction::IntegrationOptions fine_integration = ps_options.integration;
+    fine_integration.pitch_mm = fine_calibration.grid.pitch_mm;
+    Image fine_round_height, fine_kept_height;  // the round's fine heights and the round's before
     reconstruction::CastShadowCounts counts_before_sweep = shadow_counts;
     const double solve_before = solve_seconds, shadow_before = shadow_seconds, start = StageClock();
     ps = reconstruction::RefineNearLightHeights(
         std::move(ps), round_options, grid.pitch_mm,
         [&](const Image& height) {
           counts_before_sweep = shadow_counts;
+          if (fine_near_rounds) {
+            fine_kept_height = std::move(fine_round_height);
+            fine_round_height =
+                reconstruction::IntegrateNormals(fine_last_normal, fine_last_confidence, fine_integration).height_mm;
+          }
           return solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
-                             "photometric stereo (near-light round)");
+                             "photometric stereo (near-light round)", fine_near_rounds,
+                             fine_near_rounds ? &fine_round_height : nullptr);
         },
         [&](const Image&, bool kept_round) {
-          if (kept_round) shadow_counts = counts_before_sweep;
+          if (!kept_round) return;
+          shadow_counts = counts_before_sweep;
+          if (fine_near_rounds) fine_round_height = std::move(fine_kept_height);
         });
+    fine_last_normal = Image();
+    fine_last_confidence = Image();
+    // The kept round's fine heights: the fit's fine bands are solved and marked at them.
+    if (ps.near_iterations > 0) fine_near_height = std::move(fine_round_height);
     // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
     // photometric stereo's.
     solve_seconds = solve_before + (StageClock() - start) - (shadow_seconds - shadow_before);
@@ -466,12 +494,19 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   Image fine_surface_height, fine_solve_height, fine_marks;
   if (fine_fit) {
     fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
-    if (!geometry.photometric_stereo.height_mm.empty()) {
+    if (!fine_near_height.empty()) {
+      fine_solve_height = fine_near_height;  // near lights' last round on the fine grid
+    } else if (!geometry.photometric_stereo.height_mm.empty()) {
       fine_solve_height = UpsampleLinear(geometry.photometric_stereo.height_mm, fine_factor);
     }
-    // The fine heights' marks when they were integrated (distant lights), no longer needed otherwise.
+    // The fine heights' marks when they were integrated (distant lights, near lights' rounds), no
+    // longer needed otherwise.
     if (!shadow_height.empty()) {
-      fine_marks = fine_shadow_height.empty() ? UpsampleLinear(shadow_height, fine_factor) : std::move(fine_shadow_height);
+      if (!fine_near_height.empty()) {
+        fine_marks = std::move(fine_near_height);
+      } else {
+        fine_marks = fine_shadow_height.empty() ? UpsampleLinear(shadow_height, fine_factor) : std::move(fine_shadow_height);
+      }
     }
   }
   auto solve_fine_band = [&](int b, Stack* band) {
