@@ -206,9 +206,25 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // fine grid; nullptr: none) replaces `height` there, and `marks_from` too when that is `height`.
   // `keep_fine`: the fine bands' normals and confidence are also pasted into fine_last_normal and
   // fine_last_confidence.
+  // The fit's clusters on a sample of the finer grid (below, before the fit): one fine pixel in each
+  // block of step x step map pixels, with its fine normal and albedo, taken from the marked, solved
+  // fine bands. The sweep whose fine solves the fit would repeat gathers it (`gather_fine_sample`),
+  // so that no sweep runs for it alone (distant lights; near lights refined in rounds do not know
+  // their last sweep in advance, and the fit gathers theirs in a sweep of its own).
+  const bool fine_fit = fine_factor > 1 && options.fit.refine_pixel_normals;
+  const int fine_step = step * fine_factor;
+  const MetricGrid fine_sample_grid = fine_factor > 1 ? SampleGrid(fine_calibration.grid, fine_step) : MetricGrid();
+  Stack fine_sample;
+  fitting::SurfaceGeometry fine_sample_geometry;  // its normals and albedo (the heights once integrated)
+  bool fine_sample_gathered = false;
   Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
-                         bool keep_fine = false, const Image* fine_heights = nullptr) {
+                         bool keep_fine = false, const Image* fine_heights = nullptr, bool gather_fine_sample = false) {
+    if (gather_fine_sample && fine_factor > 1) {
+      fine_sample = Stack();
+      fine_sample_geometry = fitting::SurfaceGeometry();
+      fine_sample_gathered = true;
+    }
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
     Bands& solved = fine_factor > 1 ? fine_bands : bands;
@@ -247,6 +263,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        : Image(solve_grid.width, solved.Rows(b), 1, static_cast<float>(ps_options.integration.mean_height_mm),
                                solve_grid.pitch_mm);
       PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
+      if (gather_fine_sample && fine_factor > 1) {
+        AddToSample(band, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample);
+        SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
+        SampleRows(band_ps.albedo, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
+      }
       if (keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
@@ -296,6 +317,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // sweep's, for the next round's heights. The sample, and so the lights, are known.
   const bool fine_near_rounds = fine_factor > 1 && HasPointLights(out.sample) && ps_options.refine_height;
   const bool keep_fine_normals = fine_factor > 1 && (fine_near_rounds || options.mark_cast_shadows);
+  // The clusters on the finer grid (StageOptions::fit_clusters_on_fine_grid), as one band fits them
+  // on its whole fine stack (supersampled_reconstruction.h). Not for a tilted view: its fine solves
+  // read the top view on the face's plane, and one band fits that case on the maps' grid too.
+  const bool clusters_on_fine_grid = fine_fit && options.fit_clusters_on_fine_grid && !NeedsReliefRegistration(out.sample);
+  // The last photometric stereo sweep is the first when neither marks nor near-light rounds follow,
+  // else the marked one (distant lights, near ones not refined); rounds gather nothing.
+  const bool rounds_follow = HasPointLights(out.sample) && ps_options.refine_height;
+  const bool marks_follow = options.mark_cast_shadows && !rounds_follow;
+  const bool first_sweep_gathers = clusters_on_fine_grid && !rounds_follow && !marks_follow;
   if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
@@ -307,10 +337,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ps_options.diffuse_roughness = roughness;
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers);
   } else if (fine_factor > 1) {
     // On the fine bands, the sample taken above.
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers);
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
@@ -333,7 +363,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fine_last_confidence = Image();
     }
     shadow_seconds += StageClock() - start;
-    ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)");
+    ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)", false, nullptr,
+                     clusters_on_fine_grid);
   }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
@@ -489,7 +520,6 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // and albedo would cost 24 B a fine pixel), its heights from the whole fine grid's: the surface's
   // (bilinear), the last solve's for the near lights' vectors (empty: the anchor plane) and the
   // marks'. 4 B a fine pixel each, made when a fine pass below needs them.
-  const bool fine_fit = fine_factor > 1 && options.fit.refine_pixel_normals;
   const MetricGrid& fine_grid = fine_calibration.grid;
   Image fine_surface_height, fine_solve_height, fine_marks;
   if (fine_fit) {
@@ -519,28 +549,24 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
             ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
             : CropRows(fine_solve_height, row0, rows));
   };
-  // The clusters on the finer grid (StageOptions::fit_clusters_on_fine_grid), as one band fits them
-  // on its whole fine stack (supersampled_reconstruction.h): the sample is then one fine pixel in
-  // each block of step x step map pixels (as many as the maps' sample), gathered in one more sweep
-  // of the fine bands. Not for a tilted view: its fine solves read the top view on the face's
-  // plane, and one band fits that case on the maps' grid too.
-  const bool clusters_on_fine_grid = fine_fit && options.fit_clusters_on_fine_grid && !NeedsReliefRegistration(out.sample);
+  // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
+  // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
+  // solved them; its heights from the whole fine grid's.
   fitting::SurfaceGeometry sample_geometry;
   if (clusters_on_fine_grid) {
-    const int fine_step = step * fine_factor;
-    const MetricGrid fine_sample_grid = SampleGrid(fine_grid, fine_step);
-    Stack fine_sample;
-    for (int b = 0; b < fine_bands.count(); ++b) {
-      Stack band;
-      const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
-      const int row0 = fine_bands.Row0(b);
-      AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
-      SampleRows(band_ps.normal, row0, fine_step, fine_sample_grid, &sample_geometry.normals);
-      SampleRows(band_ps.albedo, row0, fine_step, fine_sample_grid, &sample_geometry.albedo);
-      SampleRows(CropRows(fine_surface_height, row0, fine_bands.Rows(b)), row0, fine_step, fine_sample_grid,
-                 &sample_geometry.height_mm);
-      ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
+    if (!fine_sample_gathered) {
+      for (int b = 0; b < fine_bands.count(); ++b) {
+        Stack band;
+        const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
+        const int row0 = fine_bands.Row0(b);
+        AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
+        SampleRows(band_ps.normal, row0, fine_step, fine_sample_grid, &fine_sample_geometry.normals);
+        SampleRows(band_ps.albedo, row0, fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
+        ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
+      }
     }
+    sample_geometry = std::move(fine_sample_geometry);
+    SampleRows(fine_surface_height, 0, fine_step, fine_sample_grid, &sample_geometry.height_mm);
     out.sample = std::move(fine_sample);
   } else {
     SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
