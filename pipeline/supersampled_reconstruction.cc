@@ -125,10 +125,14 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
   IntegrateSide(grid, near, options, alpha, &out, report, progress);
-  // The fit's stack leaves out what the heights shadow, as ReconstructSide's does.
+  // The fit's stack leaves out what the heights shadow, as ReconstructSide's does. The share
+  // reported is photometric stereo's, on the fine grid, as the banded path reports it: the maps'
+  // heights are too smooth to shadow a yarn's wall (plain at 3x: 0.02 % of the maps' observations
+  // against 13.7 % of the fine ones).
   start = StageClock();
   if (options.mark_cast_shadows) {
-    out.cast_shadow_share = reconstruction::MarkCastShadows(out.height_mm, stack, options.cast_shadows).share();
+    reconstruction::MarkCastShadows(out.height_mm, stack, options.cast_shadows);
+    out.cast_shadow_share = fine_side.cast_shadow_share;
   }
   report->steps.push_back(CastShadowStep(options, out.cast_shadow_share, near, StageClock() - start));
   if (keep_fine && every_observation) {
