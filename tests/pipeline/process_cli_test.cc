@@ -232,7 +232,7 @@ TEST_F(ProcessCli, GnuParallelRecipeFromTheDocs) {
 // the camera's dpi solves on the camera's grid and writes maps on the maps' grid.
 TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
   auto process = [&](const std::string& k, const std::string& out) { return FastProcessOfA("--ps-supersample " + k, out); };
-  EXPECT_EQ(RunShell(process("4", "pss_bad")), 2);
+  EXPECT_EQ(RunShell(process("5", "pss_bad")), 2);
   EXPECT_FALSE(fs::exists(root_ / "pss_bad"));
   ASSERT_EQ(RunShell(process("0", "pss_auto")), 0);
   std::ifstream in(root_ / "pss_auto" / "report.json");

@@ -166,6 +166,15 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   native.ps_supersample = 0;
   const ProcessResult at_camera = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "native", "native"}, native);
   EXPECT_EQ(at_camera.report.options["ps_supersample_front"], 1);
+  // Maps at a quarter of the camera's dpi take its grid (K = 4); at a fifth, the largest factor.
+  ProcessOptions quarter = native;
+  quarter.dpi = kCameraDpi / 4;
+  const ProcessResult at_quarter = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "quarter", "quarter"}, quarter);
+  EXPECT_EQ(at_quarter.report.options["ps_supersample_front"], 4);
+  ProcessOptions fifth = native;
+  fifth.dpi = kCameraDpi / 5;
+  const ProcessResult at_fifth = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "fifth", "fifth"}, fifth);
+  EXPECT_EQ(at_fifth.report.options["ps_supersample_front"], kMaxPsSupersample);
 
   ProcessOptions bad;
   bad.ps_supersample = kMaxPsSupersample + 1;
