@@ -193,7 +193,15 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
                           [](const BenchCase& c) { return c.RunId() == "velvet_distant_48_fast" && c.group == "matrix"; }),
             1);
   options.quick = false;
-  EXPECT_GT(BenchMatrix(options).size(), cases.size());
+  const auto full = BenchMatrix(options);
+  EXPECT_GT(full.size(), cases.size());
+  // The full matrix has the camera at 4x (the largest --ps-supersample), solved on its own grid.
+  EXPECT_EQ(std::count_if(full.begin(), full.end(),
+                          [](const BenchCase& c) {
+                            return c.group == "camera-finer" && c.camera_per_map == 4 && c.ps_supersample == 0;
+                          }),
+            2)
+      << "plain at 4x on the camera's grid, levelled by a plane and by a quadratic";
 }
 
 }  // namespace
