@@ -164,7 +164,7 @@ bool ProcessOptions::Check(std::string* why) const {
   if (!solver.empty() && solver != "ls" && solver != "robust") return fail("--solver must be ls or robust");
   if (!(max_memory_gib > 0.0 && max_memory_gib <= 1e6)) return fail("--max-memory must be a number of GiB in (0, 1e6]");
   if (ps_supersample < 0 || ps_supersample > kMaxPsSupersample) {
-    return fail("--ps-supersample must be 0 (as fine as the camera resolves), 1, 2, 3 or 4");
+    return fail("--ps-supersample must be 0 (as fine as the camera resolves) or 1 to " + std::to_string(kMaxPsSupersample));
   }
   if (!integrator.empty() && integrator != "dct" && integrator != "robust") return fail("--integrator must be dct or robust");
   if (levelling != "none" && levelling != "plane" && levelling != "quadratic") {

@@ -26,16 +26,34 @@
 
 namespace u3mscan {
 
-// Largest supersampling factor: 4 x 4 fine solves per map pixel (a 36-megapixel camera over a
-// 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps: 16 times the maps' stack,
-// processed in bands). At 4x rather than 3x from a 1200 dpi camera (docs/reconstruction.md,
-// "Photometric stereo at the camera's resolution"): plain 1.110 -> 0.918 deg, twill 1.578 -> 1.336.
-inline constexpr int kMaxPsSupersample = 4;
+// Largest supersampling factor: 5 x 5 fine solves per map pixel (a 36-megapixel camera over a
+// 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps; the fine grid is then taken
+// one step finer than the camera, PsSupersampleForCameraRatio; 25 times the maps' stack, processed
+// in bands).
+inline constexpr int kMaxPsSupersample = 5;
 
-// The factor a side's cameras support: the floor of its most vertical view's camera pixels per map
-// pixel (at the grid's centre, on the face's plane), within [1, kMaxPsSupersample]. `views`: the
-// side's views (SideViews, or its stack). A camera at 2.98 px per map px (rounding of its dpi)
-// counts as 3.
+// From this many camera pixels per map pixel on, the factor is not the camera's own pitch.
+inline constexpr int kFirstFactorOffTheCameraPitch = 4;
+
+// The factor for a top camera with `camera_px_per_map_px` pixels per map pixel (R), within [1,
+// kMaxPsSupersample]: the floor of R (a camera at 2.98 px per map px, its dpi rounded, counts as
+// 3), and from kFirstFactorOffTheCameraPitch on one more, never the camera's own pitch (R = 4 ->
+// 5, R = 5 -> 4). Why: a fine grid at the camera's pitch reads every fine pixel of a region at
+// the same sub-pixel phase between camera pixels, and the normals carry a bias that depends on
+// that phase; as the phase drifts across the map (the camera's pitch on the sample's face is not
+// exactly the grid's) the bias becomes a lean and the height a bowl, of either sign (twill at
+// 1200 dpi, maps at 300 dpi, K = 4: height 11.3, 6.8 and 5.6 % of the range on seeds 1 to 3;
+// the same frames with the camera's principal point moved by 0.25, 0.5 and 0.75 px turn the lean
+// from +0.018 to 0.000, -0.008 and +0.012). With one fine pixel more than camera pixels the
+// phases of a map pixel's fine pixels spread over the camera pixel and the bias averages out
+// (docs/reconstruction.md, "The camera's own pitch"). Measured at R = 4 only: at R = 3, K = 4
+// against 3 was neither closer nor further on three seeds, so below kFirstFactorOffTheCameraPitch
+// the floor stands.
+int PsSupersampleForCameraRatio(double camera_px_per_map_px);
+
+// The factor a side's cameras support: PsSupersampleForCameraRatio of its most vertical view's
+// camera pixels per map pixel (at the grid's centre, on the face's plane). `views`: the side's
+// views (SideViews, or its stack).
 int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views);
 
 // The factor a run without bands uses (`reconstruct`; `process` plans bands on the finer grid

@@ -2,6 +2,7 @@
 // `process --ps-supersample`): the synthetic plain weave photographed at 600 dpi and processed into
 // 300 dpi maps, on the maps' grid (1) and on a grid as fine as the camera resolves (0: auto, 2x),
 // against the truth with bench::Evaluate (`u3mscan evaluate`).
+#include <cmath>
 #include <gtest/gtest.h>
 
 #include <iostream>
@@ -165,15 +166,16 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   native.ps_supersample = 0;
   const ProcessResult at_camera = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "native", "native"}, native);
   EXPECT_EQ(at_camera.report.options["ps_supersample_front"], 1);
-  // Maps at a quarter of the camera's dpi take its grid (K = 4); at a fifth, the largest factor.
+  // Maps at a third of the camera's dpi take its grid (K = 3); at a quarter, one step finer than
+  // the camera (K = 5, never its own pitch: PsSupersampleForCameraRatio).
+  ProcessOptions third = native;
+  third.dpi = kCameraDpi / 3;
+  const ProcessResult at_third = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "third", "third"}, third);
+  EXPECT_EQ(at_third.report.options["ps_supersample_front"], 3);
   ProcessOptions quarter = native;
   quarter.dpi = kCameraDpi / 4;
   const ProcessResult at_quarter = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "quarter", "quarter"}, quarter);
-  EXPECT_EQ(at_quarter.report.options["ps_supersample_front"], 4);
-  ProcessOptions fifth = native;
-  fifth.dpi = kCameraDpi / 5;
-  const ProcessResult at_fifth = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "fifth", "fifth"}, fifth);
-  EXPECT_EQ(at_fifth.report.options["ps_supersample_front"], kMaxPsSupersample);
+  EXPECT_EQ(at_quarter.report.options["ps_supersample_front"], 5);
 
   ProcessOptions bad;
   bad.ps_supersample = kMaxPsSupersample + 1;
@@ -188,6 +190,34 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
 // maps' grid, where a pixel's mixture of yarn facets looks like a weak broad lobe
 // (docs/fitting.md, "Clusters on the finer grid"), with normals no worse: the roughness closer,
 // and the specular measured near its truth.
+TEST(SupersampledReconstruction, TheFactorIsNeverTheCamerasOwnPitchFromFourPixelsOn) {
+  // Below 4 camera pixels per map pixel, the floor (2.98 counts as 3; maps at the camera's dpi: 1).
+  EXPECT_EQ(PsSupersampleForCameraRatio(0.5), 1);
+  EXPECT_EQ(PsSupersampleForCameraRatio(1.0), 1);
+  EXPECT_EQ(PsSupersampleForCameraRatio(2.98), 3);
+  EXPECT_EQ(PsSupersampleForCameraRatio(3.5), 3);
+  // From 4 on, one step finer than the camera, and never within a quarter of its own pitch.
+  EXPECT_EQ(PsSupersampleForCameraRatio(3.98), 5);
+  EXPECT_EQ(PsSupersampleForCameraRatio(4.003), 5);
+  EXPECT_EQ(PsSupersampleForCameraRatio(4.6), 5);
+  EXPECT_EQ(PsSupersampleForCameraRatio(5.0), 4);
+  EXPECT_EQ(PsSupersampleForCameraRatio(5.2), 4);
+  EXPECT_EQ(PsSupersampleForCameraRatio(5.5), 5);
+  EXPECT_EQ(PsSupersampleForCameraRatio(8.0), kMaxPsSupersample);
+  EXPECT_EQ(PsSupersampleForCameraRatio(1e12), kMaxPsSupersample);
+  // No camera, or one that resolves nothing: the maps' grid.
+  EXPECT_EQ(PsSupersampleForCameraRatio(0.0), 1);
+  EXPECT_EQ(PsSupersampleForCameraRatio(std::nan("")), 1);
+  for (double r = 0.1; r < 12.0; r += 0.01) {
+    const int k = PsSupersampleForCameraRatio(r);
+    ASSERT_GE(k, 1) << r;
+    ASSERT_LE(k, kMaxPsSupersample) << r;
+    if (r >= 3.95) {
+      ASSERT_GE(std::abs(r - k), 0.25) << "the camera's own pitch at R = " << r;
+    }
+  }
+}
+
 TEST(SupersampledReconstruction, ClustersOnTheFinerGridReadTheLobeCloser) {
   // Measured on this capture (see the test's [ MEASURED ] lines): roughness error 0.046 -> 0.021,
   // specular 0.371 -> 0.388 for 0.5, normals 2.19 -> 2.08 deg.
