@@ -22,8 +22,6 @@ namespace {
 
 // A camera at 2.98 px per map px (its dpi rounded) supports 3: the floor is taken this much above.
 constexpr double kFactorSlack = 0.05;
-// A factor this close to the camera's pixels per map pixel counts as its own pitch (5 % at 5).
-constexpr double kNearTheCameraPitch = 0.25;
 
 // The side's sample frames (manifest indices) of the (camera, light) pairs `stack` holds, and of
 // those only view `only_view`'s camera when it is >= 0.
@@ -47,12 +45,7 @@ std::vector<std::size_t> FramesOf(const Manifest& manifest, const std::string& s
 int PsSupersampleForCameraRatio(double camera_px_per_map_px) {
   if (!(camera_px_per_map_px > 0.0)) return 1;
   const double whole = std::floor(std::min(camera_px_per_map_px, 1e6) + kFactorSlack);
-  const int native = std::clamp(static_cast<int>(whole), 1, kMaxPsSupersample + 1);
-  if (native < kFirstFactorOffTheCameraPitch) return native;
-  int k = std::min(native + 1, kMaxPsSupersample);
-  // Capped back onto the camera's own pitch (R = 5): one step coarser instead.
-  if (std::abs(camera_px_per_map_px - k) < kNearTheCameraPitch) --k;
-  return k;
+  return std::clamp(static_cast<int>(whole), 1, kMaxAutoPsSupersample);
 }
 
 int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views) {

@@ -26,29 +26,28 @@
 
 namespace u3mscan {
 
-// Largest supersampling factor: 5 x 5 fine solves per map pixel (a 36-megapixel camera over a
-// 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps; the fine grid is then taken
-// one step finer than the camera, PsSupersampleForCameraRatio; 25 times the maps' stack, processed
-// in bands).
+// Largest supersampling factor asked for (`--ps-supersample 5`): 5 x 5 fine solves per map pixel.
 inline constexpr int kMaxPsSupersample = 5;
 
-// From this many camera pixels per map pixel on, the factor is not the camera's own pitch.
-inline constexpr int kFirstFactorOffTheCameraPitch = 4;
+// Largest factor the default (0: as fine as the camera resolves) takes: 4 x 4 (a 36-megapixel
+// camera over a 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps: 16 times the
+// maps' stack, processed in bands). At 4x rather than 3x from a 1200 dpi camera
+// (docs/reconstruction.md, "Photometric stereo at the camera's resolution"): plain 1.110 -> 0.918
+// deg, twill 1.578 -> 1.336.
+inline constexpr int kMaxAutoPsSupersample = 4;
 
-// The factor for a top camera with `camera_px_per_map_px` pixels per map pixel (R), within [1,
-// kMaxPsSupersample]: the floor of R (a camera at 2.98 px per map px, its dpi rounded, counts as
-// 3), and from kFirstFactorOffTheCameraPitch on one more, never the camera's own pitch (R = 4 ->
-// 5, R = 5 -> 4). Why: a fine grid at the camera's pitch reads every fine pixel of a region at
-// the same sub-pixel phase between camera pixels, and the normals carry a bias that depends on
-// that phase; as the phase drifts across the map (the camera's pitch on the sample's face is not
-// exactly the grid's) the bias becomes a lean and the height a bowl, of either sign (twill at
-// 1200 dpi, maps at 300 dpi, K = 4: height 11.3, 6.8 and 5.6 % of the range on seeds 1 to 3;
-// the same frames with the camera's principal point moved by 0.25, 0.5 and 0.75 px turn the lean
-// from +0.018 to 0.000, -0.008 and +0.012). With one fine pixel more than camera pixels the
-// phases of a map pixel's fine pixels spread over the camera pixel and the bias averages out
-// (docs/reconstruction.md, "The camera's own pitch"). Measured at R = 4 only: at R = 3, K = 4
-// against 3 was neither closer nor further on three seeds, so below kFirstFactorOffTheCameraPitch
-// the floor stands.
+// The default factor for a top camera with `camera_px_per_map_px` pixels per map pixel (R): its
+// floor (a camera at 2.98 px per map px, its dpi rounded, counts as 3), within [1,
+// kMaxAutoPsSupersample]; 1 when R is not positive.
+//
+// At K = R every fine pixel of a region is read at the same sub-pixel phase between camera pixels,
+// and the normals carry a bias that depends on that phase; as the phase drifts across the map
+// (the camera's pitch on the sample's face is not exactly the grid's) a small map's height gets a
+// bowl of either sign (twill at 1200 dpi, 256 px maps at 300 dpi, K = 4: height 11.3, 6.8 and
+// 5.6 % of the range on seeds 1 to 3). K = 5 (one fine pixel more than camera pixels, their
+// phases spread) takes the bowl out and read closer normals on 9 of 11 such runs, but on a 9 MP
+// capture 1.503 against 1.438 deg in 2.1 times the run time: so it is asked for, not the default
+// (docs/reconstruction.md, "The camera's own pitch").
 int PsSupersampleForCameraRatio(double camera_px_per_map_px);
 
 // The factor a side's cameras support: PsSupersampleForCameraRatio of its most vertical view's

@@ -232,7 +232,7 @@ TEST_F(ProcessCli, GnuParallelRecipeFromTheDocs) {
 // the camera's dpi solves on the camera's grid and writes maps on the maps' grid.
 TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
   auto process = [&](const std::string& k, const std::string& out) { return FastProcessOfA("--ps-supersample " + k, out); };
-  EXPECT_EQ(RunShell(process("5", "pss_bad")), 2);
+  EXPECT_EQ(RunShell(process("6", "pss_bad")), 2);
   EXPECT_FALSE(fs::exists(root_ / "pss_bad"));
   ASSERT_EQ(RunShell(process("0", "pss_auto")), 0);
   std::ifstream in(root_ / "pss_auto" / "report.json");
@@ -254,7 +254,7 @@ TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
   ASSERT_EQ(RunShell(reconstruct("--ps-supersample 1", "rec_maps_grid")), 0);
   ASSERT_EQ(RunShell(reconstruct("--ps-supersample 2", "rec_camera_grid")), 0);
   ASSERT_EQ(RunShell(reconstruct("", "rec_default")), 0);
-  EXPECT_EQ(RunShell(reconstruct("--ps-supersample 5", "rec_bad")), 2);
+  EXPECT_EQ(RunShell(reconstruct("--ps-supersample 6", "rec_bad")), 2);
   const Image on_maps = ReadImageFile(root_ / "rec_maps_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
   const Image on_camera = ReadImageFile(root_ / "rec_camera_grid" / "maps" / "normal.exr", PixelEncoding::kLinear);
   const Image by_default = ReadImageFile(root_ / "rec_default" / "maps" / "normal.exr", PixelEncoding::kLinear);
