@@ -43,9 +43,10 @@ std::vector<std::size_t> FramesOf(const Manifest& manifest, const std::string& s
 }  // namespace
 
 int PsSupersampleForCameraRatio(double camera_px_per_map_px) {
-  if (!(camera_px_per_map_px > 0.0)) return 1;
-  const double whole = std::floor(std::min(camera_px_per_map_px, 1e6) + kFactorSlack);
-  return std::clamp(static_cast<int>(whole), 1, kMaxAutoPsSupersample);
+  if (!(camera_px_per_map_px > 0.0)) return 1;  // NaN too
+  // Clamped as a double: the cast of a huge ratio would overflow.
+  return static_cast<int>(std::clamp(std::floor(camera_px_per_map_px + kFactorSlack), 1.0,
+                                     static_cast<double>(kMaxAutoPsSupersample)));
 }
 
 int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views) {

@@ -2,9 +2,9 @@
 // `process --ps-supersample`): the synthetic plain weave photographed at 600 dpi and processed into
 // 300 dpi maps, on the maps' grid (1) and on a grid as fine as the camera resolves (0: auto, 2x),
 // against the truth with bench::Evaluate (`u3mscan evaluate`).
-#include <cmath>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <iostream>
 #include <string>
 
@@ -189,17 +189,14 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   EXPECT_FALSE(bad.Check(&why));
 }
 
-// The clusters fitted on the finer grid read the weave's lobe closer to its truth than on the
-// maps' grid, where a pixel's mixture of yarn facets looks like a weak broad lobe
-// (docs/fitting.md, "Clusters on the finer grid"), with normals no worse: the roughness closer,
-// and the specular measured near its truth.
 TEST(SupersampledReconstruction, TheDefaultFactorIsTheFloorOfTheCamerasPixelsPerMapPixel) {
   EXPECT_EQ(PsSupersampleForCameraRatio(0.5), 1);
   EXPECT_EQ(PsSupersampleForCameraRatio(1.0), 1);
   EXPECT_EQ(PsSupersampleForCameraRatio(2.98), 3);  // a dpi rounded down still counts
   EXPECT_EQ(PsSupersampleForCameraRatio(3.5), 3);
   EXPECT_EQ(PsSupersampleForCameraRatio(4.003), 4);
-  // The default stops at kMaxAutoPsSupersample; 5 is asked for (docs/reconstruction.md, "The camera's own pitch").
+  // The default stops at kMaxAutoPsSupersample; 5 is asked for (docs/reconstruction.md, "The
+  // camera's own pitch").
   EXPECT_EQ(PsSupersampleForCameraRatio(5.0), kMaxAutoPsSupersample);
   EXPECT_EQ(PsSupersampleForCameraRatio(1e12), kMaxAutoPsSupersample);
   EXPECT_LT(kMaxAutoPsSupersample, kMaxPsSupersample);
@@ -209,6 +206,10 @@ TEST(SupersampledReconstruction, TheDefaultFactorIsTheFloorOfTheCamerasPixelsPer
   EXPECT_EQ(PsSupersampleForCameraRatio(std::nan("")), 1);
 }
 
+// The clusters fitted on the finer grid read the weave's lobe closer to its truth than on the
+// maps' grid, where a pixel's mixture of yarn facets looks like a weak broad lobe
+// (docs/fitting.md, "Clusters on the finer grid"), with normals no worse: the roughness closer,
+// and the specular measured near its truth.
 TEST(SupersampledReconstruction, ClustersOnTheFinerGridReadTheLobeCloser) {
   // Measured on this capture (see the test's [ MEASURED ] lines): roughness error 0.046 -> 0.021,
   // specular 0.371 -> 0.388 for 0.5, normals 2.19 -> 2.08 deg.
