@@ -151,16 +151,16 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 }
 
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
-                                  const Image& maps_normals, const Image& maps_valid, int k, bool near,
+                                  const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress) {
   // AdoptFittedNormals' integrator (also for near lights), on each grid.
   reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
-  const double maps_pitch = maps_normals.pitch_mm();
-  integration.pitch_mm = maps_pitch / k;
+  integration.pitch_mm = maps_pitch_mm / k;
   fine_normals.set_pitch_mm(integration.pitch_mm);
+  const Image maps_normals = AverageNormalsOntoMaps(fine_normals, k, maps_pitch_mm, fine_weights);
   const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
   fine_normals = Image();
-  integration.pitch_mm = maps_pitch;
+  integration.pitch_mm = maps_pitch_mm;
   const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
   // Each fine height is the height of the point seen there: weighted by its share of the surface.
   return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights);
@@ -204,11 +204,10 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
       colour.ApplyTo(fit.cluster_id, &fit.base_color);
     }
     if (!fine_fit.normals.empty()) {
-      Image fit_normals_on_grid = std::move(fit.normals);  // refined on the maps' grid: the low frequencies
       fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights);
       if (fine_height_mm) {
         *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, weights,
-                                                      fit_normals_on_grid, geometry.valid, k, HasPointLights(stack),
+                                                      geometry.valid, k, stack.grid.pitch_mm, HasPointLights(stack),
                                                       options, progress);
       }
     }

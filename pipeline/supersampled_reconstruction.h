@@ -101,23 +101,29 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 // 1.94 after a refinement on the maps' grid). The refined fine normals are also integrated on the
 // fine grid, and `fine_height_mm` (not null) gets, per map pixel, the mean of its fine heights (the
 // truth's own definition of a pixel's height, which integrating normals on the maps' grid misses at
-// the yarn steps) for the detail, and the maps' grid integration of the normals refined there for
-// the wavelengths longer than a few map pixels (the fine heights drift there). Left empty when the
-// normals were not refined on the fine grid. The same fine step gives the base colour
+// the yarn steps) for the detail, and for the wavelengths longer than a few map pixels (the fine
+// heights drift there) the maps' grid integration of the same fine normals' average, the normal
+// map written (IntegrateFineRefinedNormals says why not the normals refined on the maps' grid).
+// Left empty when the normals were not refined on the fine grid. The same fine step gives the base colour
 // (options.base_colour_from_fine_grid, fine_colour.h): each map pixel the mean of its fitted fine
 // pixels'. `fine` is released before returning.
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
                                           const StageOptions& options, RunReport* report,
                                           const ProgressCallback& progress = {}, Image* fine_height_mm = nullptr);
 
-// The height of normals refined on the fine grid (`fine_normals`, its `fine_valid`; consumed) and
-// on the maps' grid (`maps_normals`, its pitch the maps', `maps_valid`): each integrated with
-// AdoptFittedNormals' integrator (`near`: the near-light one) and joined by
-// HeightFromFineAndMapsGrids, the fine heights weighted by `fine_weights` (SurfaceAreaWeights of
-// `fine_normals`, which the caller has already made for their average; empty: all 1).
+// The height of normals refined on the fine grid (`fine_normals`, its `fine_valid`; consumed), from
+// them alone: integrated on the fine grid for the detail, and their average onto the maps
+// (AverageNormalsOntoMaps weighted by `fine_weights`, SurfaceAreaWeights of `fine_normals`, which
+// the caller has already made; empty: all 1) integrated on the maps' grid (`maps_valid`, pitch
+// `maps_pitch_mm` = k fine pixels) for the long wavelengths; joined by HeightFromFineAndMapsGrids,
+// the fine heights weighted by `fine_weights`. Both integrations are AdoptFittedNormals' (`near`:
+// the near-light one). The long wavelengths used to come from the normals the fit refined on the
+// maps' grid: one normal fitted to a map pixel's photographs is its facets' mean as the camera sees
+// them, which leans toward the camera by about the facets' slope covariance times the ray's lean,
+// a bowl centred under the camera (docs/reconstruction.md, "Where the bowl came from").
 // FitSideWithFineNormals' height, and the banded path's.
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
-                                  const Image& maps_normals, const Image& maps_valid, int k, bool near,
+                                  const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress = {});
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):

@@ -613,10 +613,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
-    const Image maps_normals = std::move(out.fit.normals);  // refined on the maps' grid: the long wavelengths
     out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm, fine_weights);
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),
-                                              fine_weights, maps_normals, geometry.valid, fine_factor, near, options,
+                                              fine_weights, geometry.valid, fine_factor, grid.pitch_mm, near, options,
                                               progress);
     fine_fit_seconds = StageClock() - fine_start;
   }

@@ -1,12 +1,16 @@
 // Averaging the finer grid onto the maps' grid along the camera's rays (pipeline/fine_grid.h
-// SurfaceAreaWeights, BlockWeightedMean, AverageNormalsOntoMaps).
+// SurfaceAreaWeights, BlockWeightedMean, AverageNormalsOntoMaps), and the height integrated from
+// it (pipeline/supersampled_reconstruction.h IntegrateFineRefinedNormals).
 #include "pipeline/fine_grid.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+
+#include "pipeline/supersampled_reconstruction.h"
 
 namespace u3mscan {
 namespace {
@@ -26,6 +30,30 @@ reconstruction::ViewParallax CameraToTheLeft() {
   parallax.camera_x_mm = -60.0, parallax.camera_y_mm = 0.0, parallax.camera_z_mm = 300.0;
   parallax.x0_mm = 0.0, parallax.y1_mm = 0.0, parallax.plane_z_mm = 0.0;
   return parallax;
+}
+
+// A corrugation z = A sin(2 pi x / P) whose period P is one map pixel (steepest slope 0.5),
+// `maps` x `rows` map pixels of `fine` fine pixels a side, as the camera sees it through
+// `parallax`'s rays: each fine pixel holds the unit normal of the surface point its ray reaches,
+// x_h = x_g + z(x_h) t (the fixed point of a contraction: |z' t| <= 0.1).
+Image CorrugationSeenAlongTheRays(const reconstruction::ViewParallax& parallax, int maps, int rows, int fine,
+                                  double period) {
+  const double fine_pitch = period / fine;
+  const double amplitude = 0.5 * period / (2.0 * std::numbers::pi);
+  Image normals(maps * fine, rows * fine, 3, 0.0f, fine_pitch);
+  for (int c = 0; c < normals.width(); ++c) {
+    const double x_grid = (c + 0.5) * fine_pitch;
+    const double t = (parallax.camera_x_mm - x_grid) / parallax.camera_z_mm;
+    double x_seen = x_grid;
+    for (int i = 0; i < 60; ++i) x_seen = x_grid + amplitude * std::sin(2.0 * std::numbers::pi * x_seen / period) * t;
+    const double slope = amplitude * 2.0 * std::numbers::pi / period * std::cos(2.0 * std::numbers::pi * x_seen / period);
+    const double length = std::sqrt(1.0 + slope * slope);
+    for (int r = 0; r < normals.height(); ++r) {
+      normals.at(0, r, c) = static_cast<float>(-slope / length);
+      normals.at(2, r, c) = static_cast<float>(1.0 / length);
+    }
+  }
+  return normals;
 }
 
 TEST(SurfaceAreaWeights, AFacetFacingTheCameraWeighsLessThanOneTurnedAway) {
@@ -100,21 +128,8 @@ TEST(AverageNormalsOntoMaps, WeightedBySurfaceAreaTheCorrugationsNormalDoesNotLe
   // fill more fine pixels than their plan: the plain mean leans toward the camera.
   const reconstruction::ViewParallax parallax = CameraToTheLeft();
   constexpr int kMaps = 8, kFine = 16;
-  const double period = 0.1, fine_pitch = period / kFine;
-  const double amplitude = 0.5 * period / (2.0 * std::numbers::pi);  // steepest slope 0.5
-  Image normals(kMaps * kFine, kFine, 3, 0.0f, fine_pitch);  // one row of map pixels
-  for (int c = 0; c < normals.width(); ++c) {
-    const double x_grid = (c + 0.5) * fine_pitch;
-    const double t = (parallax.camera_x_mm - x_grid) / parallax.camera_z_mm;
-    double x_seen = x_grid;  // fixed point of x = x_grid + z(x) t (a contraction: |z' t| <= 0.1)
-    for (int i = 0; i < 60; ++i) x_seen = x_grid + amplitude * std::sin(2.0 * std::numbers::pi * x_seen / period) * t;
-    const double slope = amplitude * 2.0 * std::numbers::pi / period * std::cos(2.0 * std::numbers::pi * x_seen / period);
-    const double length = std::sqrt(1.0 + slope * slope);
-    for (int r = 0; r < kFine; ++r) {
-      normals.at(0, r, c) = static_cast<float>(-slope / length);
-      normals.at(2, r, c) = static_cast<float>(1.0 / length);
-    }
-  }
+  const double period = 0.1;
+  const Image normals = CorrugationSeenAlongTheRays(parallax, kMaps, 1, kFine, period);  // one row of map pixels
   const Image plain = AverageNormalsOntoMaps(normals, kFine, period);
   const Image weighted = AverageNormalsOntoMaps(normals, kFine, period, SurfaceAreaWeights(normals, parallax));
   for (int c = 0; c < kMaps; ++c) {
@@ -124,6 +139,39 @@ TEST(AverageNormalsOntoMaps, WeightedBySurfaceAreaTheCorrugationsNormalDoesNotLe
     EXPECT_LT(Degrees(std::acos(std::min(1.0f, weighted.at(2, 0, c)))), kQuadratureDeg) << c;
     EXPECT_NEAR(std::hypot(weighted.at(0, 0, c), weighted.at(1, 0, c), weighted.at(2, 0, c)), 1.0, kExact);
   }
+}
+
+TEST(IntegrateFineRefinedNormals, ACorrugationSeenAlongLeaningRaysKeepsItsMapFlat) {
+  // The corrugation above over 16 x 4 map pixels. Every map pixel holds one whole period, so their
+  // mean heights are equal: the map is flat. The long wavelengths come from the fine normals'
+  // average along the rays (docs/reconstruction.md, "Where the bowl came from"). Averaged without
+  // the surface weights (empty weights passed here) the map ramps by 23 um peak to valley.
+  const reconstruction::ViewParallax parallax = CameraToTheLeft();
+  constexpr int kMaps = 16, kMapRows = 4, kFine = 16;
+  constexpr double kPeriodMm = 0.1;
+  // 2 % of the corrugation's 16 um peak to valley.
+  constexpr double kFlatToleranceMm = 0.3e-3;
+  Image fine_normals = CorrugationSeenAlongTheRays(parallax, kMaps, kMapRows, kFine, kPeriodMm);
+  const Image weights = SurfaceAreaWeights(fine_normals, parallax);
+  ASSERT_FALSE(weights.empty());
+  StageOptions options;
+  options.integration.parallax = parallax;
+  const Image fine_valid(fine_normals.width(), fine_normals.height(), 1, 1.0f, fine_normals.pitch_mm());
+  const Image maps_valid(kMaps, kMapRows, 1, 1.0f, kPeriodMm);
+  const Image height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, weights, maps_valid, kFine,
+                                                   kPeriodMm, /*near=*/false, options);
+  ASSERT_EQ(height.width(), kMaps);
+  ASSERT_EQ(height.height(), kMapRows);
+  EXPECT_DOUBLE_EQ(height.pitch_mm(), kPeriodMm);
+  float low = height.at(0, 0, 0), high = low;
+  for (int r = 0; r < kMapRows; ++r) {
+    for (int c = 0; c < kMaps; ++c) {
+      ASSERT_TRUE(std::isfinite(height.at(0, r, c))) << r << ", " << c;
+      low = std::min(low, height.at(0, r, c));
+      high = std::max(high, height.at(0, r, c));
+    }
+  }
+  EXPECT_LT(high - low, kFlatToleranceMm);
 }
 
 }  // namespace
