@@ -73,6 +73,10 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "With --ps-supersample: fit the clusters and take the base colour on the maps' grid, not the "
                "finer one (for comparisons; docs/fitting.md, Clusters on the finer grid, Base colour from the "
                "finer grid)");
+  sub.add_flag("--no-plan-placement", args->options.no_plan_placement,
+               "With --ps-supersample: average each fine pixel onto the maps where its camera ray met the grid, not "
+               "where its surface point lies in plan (for comparisons; docs/reconstruction.md, Placing the fine "
+               "pixels on the plan)");
   sub.add_option("--level", args->options.levelling,
                  "The sample's low-order shape taken out of the height and normal maps: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "pipeline/plan_placement.h"
 
 namespace u3mscan {
 
@@ -32,8 +33,11 @@ class FineColourAverage {
   // as the fine grid (maps_width k). Only fitted pixels count: cluster id >= 0 and a finite colour.
   // `weights` (1 channel, the rows' size; empty: all 1) weigh each fine pixel, e.g. its share of
   // the surface seen along the camera's rays (fine_grid.h SurfaceAreaWeights); a pixel of weight 0
-  // does not count. Throws std::invalid_argument when the rows do not lie on the fine grid.
-  void Add(const Image& base_color, const Image& cluster_id, int fine_row0, const Image& weights = Image());
+  // does not count. With `placement` on (plan_placement.h, made for the whole fine grid), each
+  // fine pixel counts where its surface point lies in plan, shared among the map pixels its moved
+  // square overlaps. Throws std::invalid_argument when the rows do not lie on the fine grid.
+  void Add(const Image& base_color, const Image& cluster_id, int fine_row0, const Image& weights = Image(),
+           const PlanPlacement& placement = PlanPlacement());
 
   // Sets the base colour of every map pixel that the maps' fit fitted (`maps_cluster_id` >= 0) and
   // that has at least one fitted fine pixel to the (weighted) mean of its fitted fine pixels; the others keep
@@ -42,6 +46,10 @@ class FineColourAverage {
   long long ApplyTo(const Image& maps_cluster_id, Image* maps_base_color) const;
 
  private:
+  // One fine pixel's colour, weighted, shared among the map pixels its moved square overlaps.
+  void AddPlaced(int fine_col, int fine_row, float weight, float red, float green, float blue,
+                 const PlanPlacement& placement);
+
   int width_, height_, k_;
   std::vector<float> sum_;            // 3 per map pixel, linear RGB
   std::vector<float> weight_;         // summed weights of its fitted fine pixels (0: none), per map pixel

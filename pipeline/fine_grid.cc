@@ -32,15 +32,6 @@ Image Resize(const Image& image, double scale, int interpolation, double pitch_m
   return out;
 }
 
-// A 1-plane image blurred by a Gaussian of sigma `sigma_px`, 3 sigma either side, edges mirrored.
-Image GaussianBlur(const Image& in, double sigma_px) {
-  Image out(in.width(), in.height(), 1, 0.0f, in.pitch_mm());
-  const int size = 2 * std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px))) + 1;
-  cv::Mat to = internal::PlaneView(out, 0);
-  cv::GaussianBlur(internal::PlaneView(in, 0), to, cv::Size(size, size), sigma_px, sigma_px, cv::BORDER_REFLECT);
-  return out;
-}
-
 long long InMapPixels(long long fine_count, int k) { return (fine_count + k * k / 2) / (k * k); }
 
 }  // namespace
@@ -58,6 +49,14 @@ CalibrationResult FineCalibration(const CalibrationResult& calibration, int k) {
   fine.grid = RefineGrid(calibration.grid, k);
   for (FlatCalibration& flat : fine.flats) flat.irradiance = UpsampleLinear(flat.irradiance, k);
   return fine;
+}
+
+Image GaussianBlurPlane(const Image& in, double sigma_px) {
+  Image out(in.width(), in.height(), 1, 0.0f, in.pitch_mm());
+  const int size = 2 * std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px))) + 1;
+  cv::Mat to = internal::PlaneView(out, 0);
+  cv::GaussianBlur(internal::PlaneView(in, 0), to, cv::Size(size, size), sigma_px, sigma_px, cv::BORDER_REFLECT);
+  return out;
 }
 
 Image UpsampleLinear(const Image& coarse, int k) { return Resize(coarse, k, cv::INTER_LINEAR, coarse.pitch_mm() / k); }
@@ -137,8 +136,9 @@ Image BlockWeightedMean(const Image& fine, const Image& weights, int k, double p
   return out;
 }
 
-Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, const Image& weights) {
-  Image out = BlockWeightedMean(fine_normals, weights, k, pitch_mm);
+Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, const Image& weights,
+                             const PlanPlacement& placement) {
+  Image out = PlacedWeightedMean(fine_normals, weights, placement, k, pitch_mm);
   const std::size_t n = out.pixel_count();
   float* x = out.plane(0).data();
   float* y = out.plane(1).data();
@@ -175,10 +175,12 @@ reconstruction::PhotometricStereoResult AveragePhotometricStereoOntoMaps(const r
   return ps;
 }
 
-Image HeightFromFineAndMapsGrids(const Image& fine_height_mm, const Image& maps_height_mm, int k, const Image& weights) {
-  Image height = BlockWeightedMean(fine_height_mm, weights, k, fine_height_mm.pitch_mm() * k);
+Image HeightFromFineAndMapsGrids(const Image& fine_height_mm, const Image& maps_height_mm, int k, const Image& weights,
+                                 const PlanPlacement& placement) {
+  Image height = PlacedWeightedMean(fine_height_mm, weights, placement, k, fine_height_mm.pitch_mm() * k);
   if (maps_height_mm.empty()) return height;
-  const Image low = GaussianBlur(maps_height_mm, kHeightSplitSigmaPx), detail_low = GaussianBlur(height, kHeightSplitSigmaPx);
+  const Image low = GaussianBlurPlane(maps_height_mm, kHeightSplitSigmaPx),
+              detail_low = GaussianBlurPlane(height, kHeightSplitSigmaPx);
   for (std::size_t i = 0; i < height.pixel_count(); ++i) {
     height.data()[i] = low.data()[i] + height.data()[i] - detail_low.data()[i];
   }

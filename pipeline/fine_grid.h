@@ -6,6 +6,7 @@
 
 #include "capture/calibrate.h"
 #include "core/image.h"
+#include "pipeline/plan_placement.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
 
@@ -22,6 +23,10 @@ CalibrationResult FineCalibration(const CalibrationResult& calibration, int k);
 // heights, irradiance); nearest (masks: alpha, valid). Pitch: the image's / k.
 Image UpsampleLinear(const Image& coarse, int k);
 Image UpsampleNearest(const Image& coarse, int k);
+
+// The first plane of `in` blurred by a Gaussian of sigma `sigma_px` pixels, 3 sigma either side,
+// edges mirrored (1 plane out).
+Image GaussianBlurPlane(const Image& in, double sigma_px);
 
 // Back onto the maps' grid (pitch `pitch_mm`): each k x k block's mean, and its largest value.
 Image BlockMean(const Image& fine, int k, double pitch_mm);
@@ -44,8 +49,10 @@ Image BlockWeightedMean(const Image& fine, const Image& weights, int k, double p
 // The normalised sum of each k x k block's unit normals, each weighted by `weights` (empty: all
 // 1; SurfaceAreaWeights); a block whose normals cancel keeps +z. Over a map pixel this is close to
 // its area-average normal, the normal that integrates to its height (supersampled_reconstruction.h
-// says why the maps' grid cannot give it).
-Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, const Image& weights = Image());
+// says why the maps' grid cannot give it). With `placement` on, each fine normal counts where its
+// surface point lies in plan (plan_placement.h PlacedWeightedMean), not where its ray met the grid.
+Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, const Image& weights = Image(),
+                             const PlanPlacement& placement = PlanPlacement());
 
 // A fine photometric stereo result on the maps' grid: normals AverageNormalsOntoMaps, albedo and
 // (when set) height their block means, these three weighted by SurfaceAreaWeights(fine.normal,
@@ -61,8 +68,9 @@ reconstruction::PhotometricStereoResult AveragePhotometricStereoOntoMaps(
 // definition, which integrating on the maps' grid misses at the yarn steps) and its wavelengths
 // longer than a few map pixels from `maps_height_mm` (integrated on the maps' grid, where the fine
 // heights drift with a lean too small to see in their angles: plain at 2x, 9 um against 4 um).
-// `weights` (empty: all 1) weigh the fine heights in their block means (SurfaceAreaWeights).
+// `weights` (empty: all 1) weigh the fine heights in their block means (SurfaceAreaWeights), and
+// `placement` (when on) puts each where its surface point lies in plan (PlacedWeightedMean).
 Image HeightFromFineAndMapsGrids(const Image& fine_height_mm, const Image& maps_height_mm, int k,
-                                 const Image& weights = Image());
+                                 const Image& weights = Image(), const PlanPlacement& placement = PlanPlacement());
 
 }  // namespace u3mscan

@@ -50,6 +50,11 @@ struct StageOptions {
   // of a map pixel's facet normals for a darker colour (crevices 4-6 L*). Off only for
   // comparisons (`process --fit-on-maps-grid`).
   bool base_colour_from_fine_grid = true;
+  // With photometric stereo on a finer grid and the view's parallax on: the fine pixels' normals,
+  // heights and base colour averaged onto the maps where their surface points lie in plan, found
+  // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
+  // Off only for comparisons (`process --no-plan-placement`).
+  bool place_fine_pixels_on_plan = true;
 };
 
 StageOptions OptionsForPreset(Preset preset);

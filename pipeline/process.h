@@ -36,6 +36,10 @@ struct ProcessOptions {
   // the finer one (StageOptions::fit_clusters_on_fine_grid, base_colour_from_fine_grid; for
   // comparisons).
   bool fit_on_maps_grid = false;
+  // With --ps-supersample, average the fine pixels onto the maps where their camera rays met the
+  // grid instead of where their surface points lie in plan (StageOptions::place_fine_pixels_on_plan;
+  // for comparisons).
+  bool no_plan_placement = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
   // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need
   // bands (--max-memory) are refused with them.

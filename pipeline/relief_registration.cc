@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <vector>
 
 #include "core/units.h"
@@ -35,7 +36,7 @@ bool NeedsReliefRegistration(const Stack& stack) {
   return false;
 }
 
-Image ReliefHeightsMm(const Image& height_mm, const Image& valid, double surface_z_mm) {
+double ReliefTopMm(const Image& height_mm, const Image& valid) {
   constexpr double kTopQuantile = 0.999;
   std::vector<float> heights;
   heights.reserve(height_mm.pixel_count());
@@ -45,11 +46,17 @@ Image ReliefHeightsMm(const Image& height_mm, const Image& valid, double surface
     if (!valid.empty() && !(valid.plane(0)[i] >= 0.5f)) continue;
     heights.push_back(h[i]);
   }
-  Image out(height_mm.width(), height_mm.height(), 1, static_cast<float>(surface_z_mm), height_mm.pitch_mm());
-  if (heights.empty()) return out;
+  if (heights.empty()) return std::numeric_limits<double>::quiet_NaN();
   const std::size_t k = std::min(heights.size() - 1, static_cast<std::size_t>(kTopQuantile * heights.size()));
   std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k), heights.end());
-  const double top = heights[k];
+  return heights[k];
+}
+
+Image ReliefHeightsMm(const Image& height_mm, const Image& valid, double surface_z_mm) {
+  Image out(height_mm.width(), height_mm.height(), 1, static_cast<float>(surface_z_mm), height_mm.pitch_mm());
+  const double top = ReliefTopMm(height_mm, valid);
+  if (!std::isfinite(top)) return out;
+  const auto h = height_mm.plane(0);
   auto z = out.plane(0);
   for (std::size_t i = 0; i < z.size(); ++i) {
     if (std::isfinite(h[i])) z[i] = static_cast<float>(surface_z_mm + (h[i] - top));

@@ -32,10 +32,14 @@ int MostVerticalView(const Stack& stack);
 // kReliefRegistrationMinTiltDeg.
 bool NeedsReliefRegistration(const Stack& stack);
 
+// The top of the relief `height_mm` (integrated, known up to a constant): the 0.999 quantile of
+// its finite heights where `valid` (1 plane, >= 0.5; empty: every pixel), so that a few integration
+// spikes do not move it. NaN when there is no such height.
+double ReliefTopMm(const Image& height_mm, const Image& valid);
+
 // Absolute heights of the relief (mm, world z): `height_mm` (integrated, known up to a constant)
 // moved so that its top lies on the sample's face `surface_z_mm` (the manifest's thickness is the
-// sample's highest point, as a gauge reads it). The top is the 0.999 quantile of the heights where
-// `valid` (1 plane, >= 0.5; empty: every pixel): a few integration spikes do not move it.
+// sample's highest point, as a gauge reads it). The top is ReliefTopMm(height_mm, valid).
 Image ReliefHeightsMm(const Image& height_mm, const Image& valid, double surface_z_mm);
 
 // Grid pixels that a tilted view cannot see past the relief (a steep face turned away from it,

@@ -152,18 +152,21 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
                                   const Image& maps_valid, int k, double maps_pitch_mm, bool near,
-                                  const StageOptions& options, const ProgressCallback& progress) {
+                                  const StageOptions& options, const ProgressCallback& progress,
+                                  const PlanPlacement& placement) {
   // AdoptFittedNormals' integrator (also for near lights), on each grid.
   reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
   integration.pitch_mm = maps_pitch_mm / k;
   fine_normals.set_pitch_mm(integration.pitch_mm);
-  const Image maps_normals = AverageNormalsOntoMaps(fine_normals, k, maps_pitch_mm, fine_weights);
+  const Image maps_normals = AverageNormalsOntoMaps(fine_normals, k, maps_pitch_mm, fine_weights, placement);
   const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
   fine_normals = Image();
   integration.pitch_mm = maps_pitch_mm;
+  // Placed on the plan, the average's slopes are the surface's along the grid: no parallax.
+  if (placement.enabled()) integration.parallax.enabled = false;
   const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
   // Each fine height is the height of the point seen there: weighted by its share of the surface.
-  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights);
+  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights, placement);
 }
 
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,
@@ -190,25 +193,31 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   fitting::FitPixelRows(model, stack, surface, 0, &fit, &tally, progress);
   fitting::FinishPixelMaps(model, tally, &fit);
   const double fine_start = StageClock();
+  std::string placed;  // what the plan placement moved, for the report
   {
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
     fitting::PixelTally fine_tally;
     fitting::FitPixelRows(model, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
-    // Each fine pixel weighted by its share of the surface seen along the camera's rays (fine_grid.h).
+    // Each fine pixel weighted by its share of the surface seen along the camera's rays (fine_grid.h),
+    // and put where its surface point lies in plan (plan_placement.h), by the fine heights.
     const Image weights = SurfaceAreaWeights(fine_fit.normals, options.integration.parallax);
+    const PlanPlacement placement = options.place_fine_pixels_on_plan
+                                        ? PlanPlacement(fine.side.height_mm, fine.side.valid, options.integration.parallax, k)
+                                        : PlanPlacement();
+    placed = PlacementDetail(placement, fine.stack.grid.pitch_mm);
     // The base colour from the fine pixels' own (fine_colour.h: a map pixel's spread of facet
     // normals reads as a darker colour on the maps' grid).
     if (options.base_colour_from_fine_grid) {
       FineColourAverage colour(stack.grid.width, stack.grid.height, k);
-      colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0, weights);
+      colour.Add(fine_fit.base_color, fine_fit.cluster_id, 0, weights, placement);
       colour.ApplyTo(fit.cluster_id, &fit.base_color);
     }
     if (!fine_fit.normals.empty()) {
-      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights);
+      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights, placement);
       if (fine_height_mm) {
         *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, weights,
                                                       geometry.valid, k, stack.grid.pitch_mm, HasPointLights(stack),
-                                                      options, progress);
+                                                      options, progress, placement);
       }
     }
   }
@@ -220,7 +229,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   ReportFitStep(fit,
                 std::to_string(fit.clusters.size()) + " clusters fitted on the " +
                     (clusters_on_fine_grid ? std::to_string(k) + "x finer grid" : std::string("maps' grid")) +
-                    "; normals refined on the " + std::to_string(k) + "x finer grid" + seconds,
+                    "; normals refined on the " + std::to_string(k) + "x finer grid" + seconds + placed,
                 StageClock() - start, report);
   return fit;
 }

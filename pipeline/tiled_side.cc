@@ -589,6 +589,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // the whole fine grid.
   Image fine_height;
   double fine_fit_seconds = 0.0;
+  std::string placed;  // what the plan placement moved, for the report
   if (fine_fit && !out.fit.normals.empty()) {
     const double fine_start = StageClock();
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
@@ -599,6 +600,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     const reconstruction::ViewParallax& parallax = options.integration.parallax;
     Image fine_weights;
     if (parallax.enabled) fine_weights = Image(fine_grid.width, fine_grid.height, 1, 1.0f, fine_grid.pitch_mm);
+    // Where each fine pixel's surface point lies in plan (plan_placement.h), by the fine heights
+    // the marks came from (integrated on the whole fine grid: a yarn's valley and top apart), else
+    // the maps' heights taken there bilinearly.
+    const Image fine_valid = UpsampleNearest(geometry.valid, fine_factor);
+    const PlanPlacement placement =
+        options.place_fine_pixels_on_plan
+            ? PlanPlacement(fine_marks.empty() ? fine_surface_height : fine_marks, fine_valid, parallax, fine_factor)
+            : PlanPlacement();
+    placed = PlacementDetail(placement, fine_grid.pitch_mm);
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
       const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
@@ -609,14 +619,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       PasteRows(band_fit.normals, row0, &fine_normals);
       const Image band_weights = SurfaceAreaWeights(band_fit.normals, parallax, row0);
       if (!band_weights.empty()) PasteRows(band_weights, row0, &fine_weights);
-      if (options.base_colour_from_fine_grid) colour.Add(band_fit.base_color, band_fit.cluster_id, row0, band_weights);
+      if (options.base_colour_from_fine_grid) {
+        colour.Add(band_fit.base_color, band_fit.cluster_id, row0, band_weights, placement);
+      }
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
-    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm, fine_weights);
-    fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), UpsampleNearest(geometry.valid, fine_factor),
-                                              fine_weights, geometry.valid, fine_factor, grid.pitch_mm, near, options,
-                                              progress);
+    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm, fine_weights, placement);
+    fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
+                                              fine_factor, grid.pitch_mm, near, options, progress, placement);
     fine_fit_seconds = StageClock() - fine_start;
   }
   out.fit.times.total_s = StageClock() - start;
@@ -641,7 +652,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     char fine_detail[96];
     std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it)", fine_factor,
                   fine_fit_seconds);
-    detail += fine_detail;
+    detail += fine_detail + placed;
   }
   ReportFitStep(out.fit, std::move(detail), StageClock() - start, report);
 
