@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "pipeline/supersampled_reconstruction.h"
+#include "tests/support/leaning_camera.h"
 
 namespace u3mscan {
 namespace {
@@ -22,15 +23,7 @@ constexpr double kQuadratureDeg = 0.01;
 
 double Degrees(double radians) { return radians * 180.0 / std::numbers::pi; }
 
-// A camera 300 mm above the plane z = 0 and 60 mm to the left of a map whose top-left corner is
-// the origin: its rays lean by t = (camera - point).xy / 300, about (-0.2, 0) over the map.
-reconstruction::ViewParallax CameraToTheLeft() {
-  reconstruction::ViewParallax parallax;
-  parallax.enabled = true;
-  parallax.camera_x_mm = -60.0, parallax.camera_y_mm = 0.0, parallax.camera_z_mm = 300.0;
-  parallax.x0_mm = 0.0, parallax.y1_mm = 0.0, parallax.plane_z_mm = 0.0;
-  return parallax;
-}
+using testing::CameraToTheLeft;
 
 // A corrugation z = A sin(2 pi x / P) whose period P is one map pixel (steepest slope 0.5),
 // `maps` x `rows` map pixels of `fine` fine pixels a side, as the camera sees it through

@@ -11,6 +11,7 @@
 
 #include "pipeline/fine_colour.h"
 #include "pipeline/fine_grid.h"
+#include "tests/support/leaning_camera.h"
 
 namespace u3mscan {
 namespace {
@@ -19,15 +20,7 @@ constexpr double kFloatExact = 1e-5;  // float sums of a few dozen values of ord
 
 double Degrees(double radians) { return radians * 180.0 / std::numbers::pi; }
 
-// A camera 300 mm above the plane z = 0 (the sample's face) and 60 mm to the left of a map whose
-// top-left corner is the origin: its rays lean by t = (camera - point).xy / 300, about (-0.2, 0).
-reconstruction::ViewParallax CameraToTheLeft() {
-  reconstruction::ViewParallax parallax;
-  parallax.enabled = true;
-  parallax.camera_x_mm = -60.0, parallax.camera_y_mm = 0.0, parallax.camera_z_mm = 300.0;
-  parallax.x0_mm = 0.0, parallax.y1_mm = 0.0, parallax.plane_z_mm = 0.0;
-  return parallax;
-}
+using testing::CameraToTheLeft;
 
 // A corrugation along x whose top touches the face: z(x) = A (sin(2 pi x / P) - 1) <= 0 (mm).
 struct Corrugation {
