@@ -153,18 +153,19 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
                                   const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress,
-                                  const PlanPlacement& placement) {
+                                  const PlanPlacement& placement, Image* maps_normals) {
   // AdoptFittedNormals' integrator (also for near lights), on each grid.
   reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
   integration.pitch_mm = maps_pitch_mm / k;
   fine_normals.set_pitch_mm(integration.pitch_mm);
-  const Image maps_normals = AverageNormalsOntoMaps(fine_normals, k, maps_pitch_mm, fine_weights, placement);
+  Image average = AverageNormalsOntoMaps(fine_normals, k, maps_pitch_mm, fine_weights, placement);
   const Image fine_height = reconstruction::IntegrateNormals(fine_normals, fine_valid, integration, progress).height_mm;
   fine_normals = Image();
   integration.pitch_mm = maps_pitch_mm;
   // Placed on the plan, the average's slopes are the surface's along the grid: no parallax.
   if (placement.enabled()) integration.parallax.enabled = false;
-  const Image maps_height = reconstruction::IntegrateNormals(maps_normals, maps_valid, integration, progress).height_mm;
+  const Image maps_height = reconstruction::IntegrateNormals(average, maps_valid, integration, progress).height_mm;
+  if (maps_normals) *maps_normals = std::move(average);
   // Each fine height is the height of the point seen there: weighted by its share of the surface.
   return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights, placement);
 }
@@ -213,11 +214,12 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
       colour.ApplyTo(fit.cluster_id, &fit.base_color);
     }
     if (!fine_fit.normals.empty()) {
-      fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights, placement);
       if (fine_height_mm) {
         *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, weights,
                                                       geometry.valid, k, stack.grid.pitch_mm, HasPointLights(stack),
-                                                      options, progress, placement);
+                                                      options, progress, placement, &fit.normals);
+      } else {
+        fit.normals = AverageNormalsOntoMaps(fine_fit.normals, k, stack.grid.pitch_mm, weights, placement);
       }
     }
   }

@@ -125,11 +125,13 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
 // a bowl centred under the camera (docs/reconstruction.md, "Where the bowl came from").
 // With `placement` on (plan_placement.h), both the average and the fine heights' block means put
 // each fine pixel where its surface point lies in plan, and the average, being on the plan, is
-// integrated without the view's parallax. FitSideWithFineNormals' height, and the banded path's.
+// integrated without the view's parallax. `maps_normals` (not null) gets that average, the normal
+// map the caller writes, so that it is not made twice. FitSideWithFineNormals' height, and the
+// banded path's.
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
                                   const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress = {},
-                                  const PlanPlacement& placement = PlanPlacement());
+                                  const PlanPlacement& placement = PlanPlacement(), Image* maps_normals = nullptr);
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
 // the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the

@@ -625,9 +625,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
-    out.fit.normals = AverageNormalsOntoMaps(fine_normals, fine_factor, grid.pitch_mm, fine_weights, placement);
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
-                                              fine_factor, grid.pitch_mm, near, options, progress, placement);
+                                              fine_factor, grid.pitch_mm, near, options, progress, placement,
+                                              &out.fit.normals);
     fine_fit_seconds = StageClock() - fine_start;
   }
   out.fit.times.total_s = StageClock() - start;

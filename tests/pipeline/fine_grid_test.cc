@@ -151,8 +151,18 @@ TEST(IntegrateFineRefinedNormals, ACorrugationSeenAlongLeaningRaysKeepsItsMapFla
   options.integration.parallax = parallax;
   const Image fine_valid(fine_normals.width(), fine_normals.height(), 1, 1.0f, fine_normals.pitch_mm());
   const Image maps_valid(kMaps, kMapRows, 1, 1.0f, kPeriodMm);
+  const Image expected_average = AverageNormalsOntoMaps(fine_normals, kFine, kPeriodMm, weights);
+  Image average;
   const Image height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, weights, maps_valid, kFine,
-                                                   kPeriodMm, /*near=*/false, options);
+                                                   kPeriodMm, /*near=*/false, options, {}, PlanPlacement(), &average);
+  // The average it integrated is handed back: the normal map the caller writes.
+  ASSERT_EQ(average.width(), kMaps);
+  ASSERT_EQ(average.height(), kMapRows);
+  for (int ch = 0; ch < 3; ++ch) {
+    for (int r = 0; r < kMapRows; ++r) {
+      for (int c = 0; c < kMaps; ++c) EXPECT_EQ(average.at(ch, r, c), expected_average.at(ch, r, c)) << ch << r << c;
+    }
+  }
   ASSERT_EQ(height.width(), kMaps);
   ASSERT_EQ(height.height(), kMapRows);
   EXPECT_DOUBLE_EQ(height.pitch_mm(), kPeriodMm);
