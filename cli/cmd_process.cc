@@ -63,9 +63,10 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                  "the report gives the material's re-render error against their photographs");
   sub.add_option("--ps-supersample", args->options.ps_supersample,
                  "Photometric stereo on a grid K times finer than the maps (a camera at K times their dpi resolves "
-                 "it), the normals averaged onto them: 1 = off, 2 to 5, 0 = as fine as the top camera resolves, at most 4 (1 "
-                 "when the maps are at its dpi; 5 from a 4x camera spreads the fine pixels over its pixels: steadier heights "
-                 "on small maps, up to twice the time). "
+                 "it), the normals averaged onto them: 1 = off, 2 to 5, 0 = as fine as the top camera resolves (1 when the "
+                 "maps are at its dpi, 2 or 3 from a 2x or 3x camera; 5 from a camera at 4x or more, one fine pixel more "
+                 "than camera pixels, which spreads them over its pixels: steadier heights; 4 there runs in about 2/3 of "
+                 "the time). "
                  "Closer normals on woven fabric (docs/reconstruction.md); K^2 times the stack's memory (processed in bands "
                  "on the finer grid when that exceeds --max-memory)")
       ->capture_default_str();

@@ -36,7 +36,8 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
   sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
   sub.add_option("--ps-supersample", args->ps_supersample,
                  "Photometric stereo on a grid K times finer than the maps, the unit normals averaged onto them: 1 = "
-                 "off, 2 to 5, 0 = as fine as the top camera resolves, at most 4 (docs/reconstruction.md; without the fit's "
+                 "off, 2 to 5, 0 = as fine as the top camera resolves (2 or 3 from a 2x or 3x camera, 5 from 4x or more; "
+                 "docs/reconstruction.md; without the fit's "
                  "refinement that `process` adds, the height from the averaged normals)")
       ->capture_default_str()
       ->check(CLI::Range(0, kMaxPsSupersample));

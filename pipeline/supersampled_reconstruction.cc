@@ -45,8 +45,9 @@ std::vector<std::size_t> FramesOf(const Manifest& manifest, const std::string& s
 int PsSupersampleForCameraRatio(double camera_px_per_map_px) {
   if (!(camera_px_per_map_px > 0.0)) return 1;  // NaN too
   // Clamped as a double: the cast of a huge ratio would overflow.
-  return static_cast<int>(std::clamp(std::floor(camera_px_per_map_px + kFactorSlack), 1.0,
-                                     static_cast<double>(kMaxAutoPsSupersample)));
+  const int floor = static_cast<int>(std::clamp(std::floor(camera_px_per_map_px + kFactorSlack), 1.0,
+                                                static_cast<double>(kSpreadPhasesFromRatio)));
+  return floor >= kSpreadPhasesFromRatio ? kMaxAutoPsSupersample : floor;
 }
 
 int PsSupersampleForCameras(const CalibrationResult& calibration, const Stack& views) {

@@ -29,27 +29,30 @@ namespace u3mscan {
 // Largest supersampling factor asked for (`--ps-supersample 5`): 5 x 5 fine solves per map pixel.
 inline constexpr int kMaxPsSupersample = 5;
 
-// Largest factor the default (0: as fine as the camera resolves) takes: 4 x 4 (a 36-megapixel
-// camera over a 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps: 16 times the
-// maps' stack, processed in bands). At 4x rather than 3x from a 1200 dpi camera
+// The default (0: as fine as the camera resolves) takes the floor of the top camera's pixels per
+// map pixel R up to 3, and from R = 4 on one fine pixel more than camera pixels: 5 x 5 (a
+// 36-megapixel camera over a 15 cm sample photographs at about 1200 dpi, four times 300 dpi maps:
+// 25 times the maps' stack, processed in bands). At 4x rather than 3x from a 1200 dpi camera
 // (docs/reconstruction.md, "Photometric stereo at the camera's resolution"): plain 1.110 -> 0.918
 // deg, twill 1.578 -> 1.336.
-inline constexpr int kMaxAutoPsSupersample = 4;
+inline constexpr int kMaxAutoPsSupersample = 5;
+// The camera's pixels per map pixel from which the default spreads the phases (below).
+inline constexpr int kSpreadPhasesFromRatio = 4;
 
 // The default factor for a top camera with `camera_px_per_map_px` pixels per map pixel (R): its
-// floor (a camera at 2.98 px per map px, its dpi rounded, counts as 3), within [1,
-// kMaxAutoPsSupersample]; 1 when R is not positive.
+// floor (a camera at 2.98 px per map px, its dpi rounded, counts as 3) within [1, 3]; 5 from
+// kSpreadPhasesFromRatio on; 1 when R is not positive.
 //
 // At K = R every fine pixel of a region is read at the same sub-pixel phase between camera pixels,
 // and the normals carry a bias that depends on that phase; as the phase drifts across the map
 // (the camera's pitch on the sample's face is not exactly the grid's) a small map's height gets a
-// bowl of either sign (twill at 1200 dpi, 256 px maps at 300 dpi, K = 4: height 11.3, 6.8 and
+// bowl of either sign (twill at 1200 dpi, 192 px maps at 300 dpi, K = 4: height 11.3, 6.8 and
 // 5.6 % of the range on seeds 1 to 3). K = 5 (one fine pixel more than camera pixels, their
-// phases spread) takes the bowl out and read closer normals on 9 of 11 such runs, but on a 9 MP
-// capture 1.503 against 1.438 deg in 2.1 times the run time: so it is asked for, not the default
-// (docs/reconstruction.md, "The camera's own pitch"). With the fine pixels placed on the plan
-// (plan_placement.h) that capture reads 0.881 against 0.947 deg at K = 5, in 1.7 times the time;
-// the default stays until a 36 MP run at K = 5 has been measured.
+// phases spread) takes the bowl out: with the fine pixels placed on the plan (plan_placement.h),
+// twill 18.9 -> 3.7 %, plain 3.2 -> 1.6 %, and a 9 MP plain 0.947 -> 0.881 deg, 7.9 -> 5.1 %, in
+// 1.48 times the run time (docs/reconstruction.md, "The camera's own pitch"). At R = 3, K = 4
+// gained nothing (three seeds), so the rule starts at 4. `--ps-supersample 4` keeps the camera's
+// own grid, for a quicker run.
 int PsSupersampleForCameraRatio(double camera_px_per_map_px);
 
 // The factor a side's cameras support: PsSupersampleForCameraRatio of its most vertical view's

@@ -166,19 +166,19 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   native.ps_supersample = 0;
   const ProcessResult at_camera = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "native", "native"}, native);
   EXPECT_EQ(at_camera.report.options["ps_supersample_front"], 1);
-  // Maps at a quarter of the camera's dpi take its grid (K = 4); at a fifth, the default's largest
-  // factor (4); asked for, 5.
+  // Maps at a third of the camera's dpi take its grid (K = 3); at a quarter, one fine pixel more
+  // than camera pixels (K = 5, the phases spread); K = 4 there when asked for.
+  ProcessOptions third = native;
+  third.dpi = kCameraDpi / 3;
+  const ProcessResult at_third = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "third", "third"}, third);
+  EXPECT_EQ(at_third.report.options["ps_supersample_front"], 3);
   ProcessOptions quarter = native;
   quarter.dpi = kCameraDpi / 4;
   const ProcessResult at_quarter = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "quarter", "quarter"}, quarter);
-  EXPECT_EQ(at_quarter.report.options["ps_supersample_front"], 4);
-  ProcessOptions fifth = native;
-  fifth.dpi = kCameraDpi / 5;
-  const ProcessResult at_fifth = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "fifth", "fifth"}, fifth);
-  EXPECT_EQ(at_fifth.report.options["ps_supersample_front"], kMaxAutoPsSupersample);
-  fifth.ps_supersample = kMaxPsSupersample;
-  const ProcessResult asked = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "asked", "asked"}, fifth);
-  EXPECT_EQ(asked.report.options["ps_supersample_front"], kMaxPsSupersample);
+  EXPECT_EQ(at_quarter.report.options["ps_supersample_front"], kMaxAutoPsSupersample);
+  quarter.ps_supersample = kSpreadPhasesFromRatio;
+  const ProcessResult asked = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "asked", "asked"}, quarter);
+  EXPECT_EQ(asked.report.options["ps_supersample_front"], kSpreadPhasesFromRatio);
 
   ProcessOptions bad;
   bad.ps_supersample = kMaxPsSupersample + 1;
@@ -189,17 +189,19 @@ TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   EXPECT_FALSE(bad.Check(&why));
 }
 
-TEST(SupersampledReconstruction, TheDefaultFactorIsTheFloorOfTheCamerasPixelsPerMapPixel) {
+TEST(SupersampledReconstruction, TheDefaultFactorIsTheFloorOfTheCamerasPixelsPerMapPixelThenOneMore) {
   EXPECT_EQ(PsSupersampleForCameraRatio(0.5), 1);
   EXPECT_EQ(PsSupersampleForCameraRatio(1.0), 1);
   EXPECT_EQ(PsSupersampleForCameraRatio(2.98), 3);  // a dpi rounded down still counts
   EXPECT_EQ(PsSupersampleForCameraRatio(3.5), 3);
-  EXPECT_EQ(PsSupersampleForCameraRatio(4.003), 4);
-  // The default stops at kMaxAutoPsSupersample; 5 is asked for (docs/reconstruction.md, "The
-  // camera's own pitch").
+  // From 4 camera pixels per map pixel, one fine pixel more than camera pixels: their phases
+  // spread (docs/reconstruction.md, "The camera's own pitch").
+  EXPECT_EQ(PsSupersampleForCameraRatio(3.97), 5);
+  EXPECT_EQ(PsSupersampleForCameraRatio(4.003), 5);
   EXPECT_EQ(PsSupersampleForCameraRatio(5.0), kMaxAutoPsSupersample);
   EXPECT_EQ(PsSupersampleForCameraRatio(1e12), kMaxAutoPsSupersample);
-  EXPECT_LT(kMaxAutoPsSupersample, kMaxPsSupersample);
+  EXPECT_EQ(kMaxAutoPsSupersample, kSpreadPhasesFromRatio + 1);
+  EXPECT_LE(kMaxAutoPsSupersample, kMaxPsSupersample);
   // No camera, or one that resolves nothing: the maps' grid.
   EXPECT_EQ(PsSupersampleForCameraRatio(0.0), 1);
   EXPECT_EQ(PsSupersampleForCameraRatio(-2.0), 1);
