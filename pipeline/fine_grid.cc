@@ -155,15 +155,18 @@ Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, 
 reconstruction::PhotometricStereoResult AveragePhotometricStereoOntoMaps(const reconstruction::PhotometricStereoResult& f,
                                                                          int k, double pitch_mm,
                                                                          const reconstruction::ViewParallax& parallax,
-                                                                         int fine_row0) {
+                                                                         int fine_row0, const PlanPlacement& placement) {
+  if (placement.enabled() && fine_row0 != 0) {
+    throw std::invalid_argument("AveragePhotometricStereoOntoMaps: a placement is made for the whole fine grid (row 0)");
+  }
   reconstruction::PhotometricStereoResult ps;
   const Image weights = SurfaceAreaWeights(f.normal, parallax, fine_row0);
-  ps.normal = AverageNormalsOntoMaps(f.normal, k, pitch_mm, weights);
-  ps.albedo = BlockWeightedMean(f.albedo, weights, k, pitch_mm);
+  ps.normal = AverageNormalsOntoMaps(f.normal, k, pitch_mm, weights, placement);
+  ps.albedo = PlacedWeightedMean(f.albedo, weights, placement, k, pitch_mm);
   ps.confidence = BlockMean(f.confidence, k, pitch_mm);
   ps.condition_number = BlockMax(f.condition_number, k, pitch_mm);
   ps.used_lights = BlockMean(f.used_lights, k, pitch_mm);
-  if (!f.height_mm.empty()) ps.height_mm = BlockWeightedMean(f.height_mm, weights, k, pitch_mm);
+  if (!f.height_mm.empty()) ps.height_mm = PlacedWeightedMean(f.height_mm, weights, placement, k, pitch_mm);
   ps.ill_conditioned_pixels = InMapPixels(f.ill_conditioned_pixels, k);
   ps.dark_pixels = InMapPixels(f.dark_pixels, k);
   ps.low_albedo_pixels = InMapPixels(f.low_albedo_pixels, k);

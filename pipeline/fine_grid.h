@@ -56,12 +56,14 @@ Image AverageNormalsOntoMaps(const Image& fine_normals, int k, double pitch_mm, 
 
 // A fine photometric stereo result on the maps' grid: normals AverageNormalsOntoMaps, albedo and
 // (when set) height their block means, these three weighted by SurfaceAreaWeights(fine.normal,
-// parallax, fine_row0); confidence and used lights their block means; condition number the
-// largest; the pixel counts in map pixels (rounded). The per-run figures (near-light rounds,
-// diffuse roughness, last change) are copied.
+// parallax, fine_row0) and, with `placement` on (the whole fine grid's: fine_row0 0), put where
+// their surface points lie in plan (PlacedWeightedMean); confidence and used lights their block
+// means; condition number the largest; the pixel counts in map pixels (rounded). The per-run
+// figures (near-light rounds, diffuse roughness, last change) are copied.
 reconstruction::PhotometricStereoResult AveragePhotometricStereoOntoMaps(
     const reconstruction::PhotometricStereoResult& fine, int k, double pitch_mm,
-    const reconstruction::ViewParallax& parallax = {}, int fine_row0 = 0);
+    const reconstruction::ViewParallax& parallax = {}, int fine_row0 = 0,
+    const PlanPlacement& placement = PlanPlacement());
 
 // The height of a side whose normals were refined on the fine grid (pitch_mm / k): its detail from
 // `fine_height_mm` (integrated there; each map pixel the mean of its fine heights, the truth's own

@@ -113,18 +113,25 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   const reconstruction::PhotometricStereoResult& f = fine_side.photometric_stereo;
   start = StageClock();
   SideReconstruction out;
-  out.photometric_stereo = AveragePhotometricStereoOntoMaps(f, k, grid.pitch_mm, options.integration.parallax);
+  // Each fine pixel put where its surface point lies in plan, by the fine heights, as the fit's
+  // refined normals are (FitSideWithFineNormals): the maps' normals, albedo and heights, and so the
+  // normals `reconstruct` writes and those the maps' fit starts from.
+  const PlanPlacement placement = options.place_fine_pixels_on_plan
+                                      ? PlanPlacement(fine_side.height_mm, fine_side.valid, options.integration.parallax, k)
+                                      : PlanPlacement();
+  out.photometric_stereo = AveragePhotometricStereoOntoMaps(f, k, grid.pitch_mm, options.integration.parallax, 0, placement);
   double solve_seconds = 0.0;
   for (const StepRecord& s : fine_report.steps) {
     if (s.name.rfind("photometric stereo", 0) == 0 || s.name == "cast shadows") solve_seconds += s.seconds;
   }
   const bool near = HasPointLights(*stack);
-  char detail[240];
+  char detail[320];
   std::snprintf(detail, sizeof detail,
-                "on the %dx%d grid (%d x %d solves per map pixel), %s; the unit normals averaged onto the maps' grid",
+                "on the %dx%d grid (%d x %d solves per map pixel), %s; the unit normals averaged onto the maps' grid%s",
                 fine_side.photometric_stereo.normal.width(), fine_side.photometric_stereo.normal.height(), k, k,
                 near ? ("near point lights, height refined " + std::to_string(f.near_iterations) + " rounds").c_str()
-                     : "distant lights");
+                     : "distant lights",
+                PlacementDetail(placement, fine.grid.pitch_mm).c_str());
   report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(options.photometric_stereo.solver) + ", " +
                                std::to_string(k) + "x finer grid)",
                            true, detail, solve_seconds + (StageClock() - start)});
@@ -132,7 +139,13 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
     report->steps.push_back({"near-light refinement", false,
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
   }
-  IntegrateSide(grid, near, options, alpha, &out, report, progress);
+  // Placed on the plan, the average's slopes are the surface's along the grid: no parallax.
+  StageOptions maps_options = options;
+  if (placement.enabled()) {
+    maps_options.integration.parallax.enabled = false;
+    maps_options.photometric_stereo.integration.parallax.enabled = false;
+  }
+  IntegrateSide(grid, near, maps_options, alpha, &out, report, progress);
   // The fit's stack leaves out what the heights shadow, as ReconstructSide's does. The share
   // reported is photometric stereo's, on the fine grid, as the banded path reports it: the maps'
   // heights are too smooth to shadow a yarn's wall (plain at 3x: 0.02 % of the maps' observations

@@ -273,6 +273,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
       }
       if (fine_factor > 1) {
+        // Not placed on the plan (one band's is): a placed square reaches the next band's rows,
+        // which this band does not hold; the fit's refined normals, written, are placed.
         band_ps = AveragePhotometricStereoOntoMaps(band_ps, fine_factor, grid.pitch_mm, options.integration.parallax,
                                                    solved.Row0(b));
       }

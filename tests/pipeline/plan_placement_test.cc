@@ -165,6 +165,53 @@ TEST(PlacedWeightedMean, PutsACorrugationSeenAlongTheRaysBackOnThePlan) {
   EXPECT_GT(worst_grid_normal, 4.0 * kNormalToleranceDeg);
 }
 
+TEST(AveragePhotometricStereoOntoMaps, PlacesTheNormalsAlbedoAndHeightsAsThePlacedMeans) {
+  // The photometric-stereo result of the finer grid (what `reconstruct` writes, and the maps' fit
+  // starts from) goes onto the maps through the same placement as the fit's refined normals: its
+  // normals are AverageNormalsOntoMaps', its albedo and heights PlacedWeightedMean's, each with the
+  // surface weights of its own normals. The corrugation of the test above, seen along the rays.
+  const reconstruction::ViewParallax parallax = CameraToTheLeft();
+  constexpr int kMaps = 12, kFine = 8, kRows = 2;
+  constexpr double kPitchMm = 0.1;
+  const SeenAlongTheRays seen = Seen(Corrugation(), parallax, kMaps * kFine, kRows * kFine, kPitchMm / kFine);
+  reconstruction::PhotometricStereoResult fine;
+  fine.normal = seen.normals;
+  fine.height_mm = seen.height;
+  fine.albedo = Image(kMaps * kFine, kRows * kFine, 3, 0.0f, kPitchMm / kFine);
+  for (int r = 0; r < kRows * kFine; ++r) {
+    for (int c = 0; c < kMaps * kFine; ++c) {
+      for (int ch = 0; ch < 3; ++ch) fine.albedo.at(ch, r, c) = static_cast<float>(0.2 + 0.1 * ch + 0.004 * c);
+    }
+  }
+  fine.confidence = Image(kMaps * kFine, kRows * kFine, 1, 1.0f, kPitchMm / kFine);
+  fine.condition_number = Image(kMaps * kFine, kRows * kFine, 1, 2.0f, kPitchMm / kFine);
+  fine.used_lights = Image(kMaps * kFine, kRows * kFine, 1, 8.0f, kPitchMm / kFine);
+  const PlanPlacement placement(seen.height, Image(), parallax, kFine);
+  ASSERT_TRUE(placement.enabled());
+  const reconstruction::PhotometricStereoResult placed =
+      AveragePhotometricStereoOntoMaps(fine, kFine, kPitchMm, parallax, 0, placement);
+  const reconstruction::PhotometricStereoResult on_rays = AveragePhotometricStereoOntoMaps(fine, kFine, kPitchMm, parallax);
+  const Image normals = AverageNormalsOntoMaps(seen.normals, kFine, kPitchMm, seen.weights, placement);
+  const Image albedo = PlacedWeightedMean(fine.albedo, seen.weights, placement, kFine, kPitchMm);
+  const Image height = PlacedWeightedMean(seen.height, seen.weights, placement, kFine, kPitchMm);
+  double moved = 0.0;  // how far the placement moved the heights from the average along the rays
+  for (int r = 0; r < kRows; ++r) {
+    for (int c = 0; c < kMaps; ++c) {
+      for (int ch = 0; ch < 3; ++ch) {
+        EXPECT_NEAR(placed.normal.at(ch, r, c), normals.at(ch, r, c), kFloatExact) << r << ", " << c;
+        EXPECT_NEAR(placed.albedo.at(ch, r, c), albedo.at(ch, r, c), kFloatExact) << r << ", " << c;
+      }
+      EXPECT_NEAR(placed.height_mm.at(0, r, c), height.at(0, r, c), kFloatExact) << r << ", " << c;
+      moved = std::max(moved, static_cast<double>(std::abs(placed.height_mm.at(0, r, c) - on_rays.height_mm.at(0, r, c))));
+    }
+  }
+  // The test above: along the rays the heights are off the plan's by several um (> 6.4 um there).
+  constexpr double kMovedAtLeastMm = 1e-3;
+  EXPECT_GT(moved, kMovedAtLeastMm);
+  // A band's rows (fine_row0 > 0) cannot take the whole grid's placement.
+  EXPECT_THROW(AveragePhotometricStereoOntoMaps(fine, kFine, kPitchMm, parallax, kFine, placement), std::invalid_argument);
+}
+
 TEST(PlacedWeightedMean, RefusesAPlacementMadeForAnotherGrid) {
   const Image heights(8, 8, 1, 0.0f, 0.01);
   const PlanPlacement placement(heights, Image(), CameraToTheLeft(), 2);

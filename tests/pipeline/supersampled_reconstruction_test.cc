@@ -157,6 +157,31 @@ TEST(SupersampledReconstruction, BandsOfANearRigRefineTheirHeightsOnTheFinerGrid
 
 // Maps as fine as the camera (no finer grid to use) get 1 from the automatic choice. A factor out
 // of range is refused, naming the option.
+TEST(SupersampledReconstruction, ThePhotometricStereoAverageIsPlacedOnThePlanUnlessTurnedOff) {
+  // In one band the fine photometric stereo's average (what `reconstruct` writes and the maps' fit
+  // starts from) is placed on the plan by the fine heights, as the fit's refined normals are; the
+  // report's step says how far the pixels moved. --no-plan-placement averages where the rays met.
+  test::TempDir dir;
+  const auto synth = PlainAtTwiceTheMapsDpi(dir);
+  auto photometric_stereo_step = [](const ProcessResult& result) {
+    for (const StepRecord& step : result.report.steps) {
+      if (step.name.rfind("photometric stereo (", 0) == 0) return step.reason;
+    }
+    return std::string("(no photometric stereo step)");
+  };
+  ProcessOptions options;
+  options.preset = Preset::kFast;
+  options.dpi = kMapDpi;
+  options.ps_supersample = 2;
+  const ProcessResult placed = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "placed", "placed"}, options);
+  ASSERT_FALSE(placed.material.empty());
+  EXPECT_NE(photometric_stereo_step(placed).find("placed on the plan"), std::string::npos) << photometric_stereo_step(placed);
+  options.no_plan_placement = true;
+  const ProcessResult on_rays = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / "rays", "rays"}, options);
+  ASSERT_FALSE(on_rays.material.empty());
+  EXPECT_EQ(photometric_stereo_step(on_rays).find("placed on the plan"), std::string::npos) << photometric_stereo_step(on_rays);
+}
+
 TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   test::TempDir dir;
   const auto synth = PlainAtTwiceTheMapsDpi(dir);
