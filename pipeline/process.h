@@ -50,8 +50,8 @@ struct ProcessOptions {
   // Photometric stereo on a grid this many times finer than the maps', the normals averaged onto
   // them (pipeline/supersampled_reconstruction.h): 1 = on the maps' grid, 2 to 5, 0 = as fine as
   // the top camera resolves (PsSupersampleForCameraRatio: the floor of its pixels per map pixel up
-  // to 3, 5 from 4 on; the default, which gives 1 when the maps are at the camera's dpi). A side whose fine stack does not fit one band is
-  // processed in bands on the finer grid (tiled_side.h).
+  // to 3, 5 from 4 on; the default, which gives 1 when the maps are at the camera's dpi). A side
+  // whose fine stack does not fit one band is processed in bands on the finer grid (tiled_side.h).
   int ps_supersample = 0;
   // The sample's low-order shape taken out of the written height and normal maps
   // (reconstruction/relief_levelling.h): none | plane | quadratic. A plane is never part of a

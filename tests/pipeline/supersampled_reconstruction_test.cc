@@ -155,8 +155,6 @@ TEST(SupersampledReconstruction, BandsOfANearRigRefineTheirHeightsOnTheFinerGrid
   EXPECT_EQ(solve->reason.find("refined 0 rounds"), std::string::npos) << solve->reason;
 }
 
-// Maps as fine as the camera (no finer grid to use) get 1 from the automatic choice. A factor out
-// of range is refused, naming the option.
 TEST(SupersampledReconstruction, ThePhotometricStereoAverageIsPlacedOnThePlanUnlessTurnedOff) {
   // In one band the fine photometric stereo's average (what `reconstruct` writes and the maps' fit
   // starts from) is placed on the plan by the fine heights, as the fit's refined normals are; the
@@ -182,6 +180,8 @@ TEST(SupersampledReconstruction, ThePhotometricStereoAverageIsPlacedOnThePlanUnl
   EXPECT_EQ(photometric_stereo_step(on_rays).find("placed on the plan"), std::string::npos) << photometric_stereo_step(on_rays);
 }
 
+// Maps as fine as the camera (no finer grid to use) get 1 from the automatic choice. A factor out
+// of range is refused, naming the option.
 TEST(SupersampledReconstruction, TheFactorFollowsTheCamera) {
   test::TempDir dir;
   const auto synth = PlainAtTwiceTheMapsDpi(dir);
