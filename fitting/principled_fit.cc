@@ -78,7 +78,7 @@ constexpr double kMaxNormalLength = 1.5;
 constexpr double kMinStartLuminance = 1e-3;
 // Forward-difference step of the per-pixel Gauss-Newton Jacobian (parameter units).
 constexpr double kPixelStep = 1e-4;
-// Normal refinement (RefineNormal): central-difference step of the tilt (tangent of the angle),
+// Normal refinement (RefineNormal): forward-difference step of the tilt (tangent of the angle),
 // Levenberg damping of the 2x2 normal equations, and the step below which it has converged.
 constexpr double kNormalStep = 1e-4;
 constexpr double kNormalDamping = 1e-3;
@@ -155,9 +155,6 @@ void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const F
   }
 }
 
-// The usable observations of pixel `index` in its local frame; returns their number (at most
-// stack.observations.size(), the size `out` must have). Also the reflectance ratios (luminance /
-// (cos_l E)) into `ratios` when non-null.
 // The reconstruction's normal of pixel `index` (world frame, not normalised).
 Eigen::Vector3d GeometryNormal(const FitContext& context, std::size_t index) {
   const Image& normals = context.geometry->normals;
@@ -167,56 +164,110 @@ Eigen::Vector3d GeometryNormal(const FitContext& context, std::size_t index) {
   return {normals.at(0, row, col), normals.at(1, row, col), normals.at(2, row, col)};
 }
 
+// One usable observation of a pixel with everything that does not depend on the pixel's normal,
+// in the world frame: RefineNormal turns these into the frame of each trial normal without reading
+// the stack again.
+struct WorldObservation {
+  Eigen::Vector3d light_world;  // unit, from the pixel's surface point toward the light
+  Eigen::Vector3d view_world;   // unit, toward the camera
+  double irradiance = 1.0;      // relative irradiance before the cosine
+  Eigen::Vector3d rgb;          // measurement, linear RGB
+  Eigen::Vector3d weight;       // 1 / sigma per channel
+};
+
+// The pixel's surface point (world, mm): the grid point raised to the reconstruction's height.
+Eigen::Vector3d SurfacePoint(const FitContext& context, int col, int row) {
+  const Image& height = context.geometry->height_mm;
+  return context.stack->grid.PixelCentreInWorld(col, row, height.empty() ? 0.0 : height.at(0, row, col));
+}
+
+// Observation `info` of pixel `index` (at `col`, `row`, surface `point`) in the world frame; false
+// when it is flagged, not finite or without irradiance.
+bool WorldObservationAt(const FitContext& context, const ObservationInfo& info, std::size_t index, int col, int row,
+                        const Eigen::Vector3d& point, WorldObservation* out) {
+  const Observation& o = *info.observation;
+  if (!o.flags.empty() && o.flags[index] != 0) return false;
+  const Eigen::Vector3d rgb(o.rgb.at(0, row, col), o.rgb.at(1, row, col), o.rgb.at(2, row, col));
+  if (!rgb.allFinite()) return false;
+  const double e = o.irradiance.empty() ? info.light->RelativeIrradianceAt(point) : o.irradiance.at(0, row, col);
+  if (!(e > 0.0) || !std::isfinite(e)) return false;
+  const FitOptions& options = *context.options;
+  out->light_world = info.light->DirectionFrom(point);
+  out->view_world = (info.view->centre_in_world_mm - point).normalized();
+  out->irradiance = e;
+  out->rgb = rgb;
+  const double floor = options.noise_floor * info.level;
+  const double min_sigma = kMinSigmaFraction * info.level;  // noise_floor may be 0
+  for (int c = 0; c < 3; ++c) out->weight(c) = 1.0 / std::max(min_sigma, floor + options.noise_relative * std::abs(rgb(c)));
+  return true;
+}
+
+// `world` in the shading frame `frame`; false when the light or the camera is below `min_cos`.
+bool ToLocalObservation(const WorldObservation& world, const ShadingFrame& frame, double min_cos, LocalObservation* out) {
+  const Eigen::Vector3d l = frame.ToLocal(world.light_world);
+  const Eigen::Vector3d v = frame.ToLocal(world.view_world);
+  if (l.z() < min_cos || v.z() < min_cos) return false;
+  out->light_local = l;
+  out->view_local = v;
+  out->irradiance = world.irradiance;
+  out->rgb = world.rgb;
+  out->weight = world.weight;
+  return true;
+}
+
+// The usable observations of pixel `index` in the world frame, into `out` (resized to the stack's
+// observation count once); returns their number.
+int GatherWorldObservations(const FitContext& context, std::size_t index, std::vector<WorldObservation>& out) {
+  const int width = context.stack->grid.width;
+  const int col = static_cast<int>(index % width);
+  const int row = static_cast<int>(index / width);
+  const Eigen::Vector3d point = SurfacePoint(context, col, row);
+  if (out.size() < context.observations.size()) out.resize(context.observations.size());
+  int count = 0;
+  for (const ObservationInfo& info : context.observations) {
+    if (WorldObservationAt(context, info, index, col, row, point, &out[count])) ++count;
+  }
+  return count;
+}
+
 // As GatherPixel, with the pixel's normal given (world frame, any length in the valid band) and
 // its tangent turned by `rotation_deg` (the cluster's anisotropy rotation, shading_frame.h).
 int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::Vector3d n, double rotation_deg,
                           LocalObservation* out, float* ratios) {
-  const Stack& stack = *context.stack;
-  const SurfaceGeometry& geometry = *context.geometry;
-  const FitOptions& options = *context.options;
-  const int width = stack.grid.width;
+  const int width = context.stack->grid.width;
   const int col = static_cast<int>(index % width);
   const int row = static_cast<int>(index / width);
   const double length = n.norm();
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return 0;
   n /= length;
   const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
-  const double h = geometry.height_mm.empty() ? 0.0 : geometry.height_mm.at(0, row, col);
-  const Eigen::Vector3d point = stack.grid.PixelCentreInWorld(col, row, h);
-
+  const Eigen::Vector3d point = SurfacePoint(context, col, row);
+  const double min_cos = context.options->min_cos;
   int count = 0;
+  WorldObservation world;
   for (const ObservationInfo& info : context.observations) {
-    const Observation& o = *info.observation;
-    if (!o.flags.empty() && o.flags[index] != 0) continue;
-    const Eigen::Vector3d rgb(o.rgb.at(0, row, col), o.rgb.at(1, row, col), o.rgb.at(2, row, col));
-    if (!rgb.allFinite()) continue;
-    const Eigen::Vector3d l_world = info.light->DirectionFrom(point);
-    const Eigen::Vector3d v_world = (info.view->centre_in_world_mm - point).normalized();
-    const Eigen::Vector3d l = frame.ToLocal(l_world);
-    const Eigen::Vector3d v = frame.ToLocal(v_world);
-    if (l.z() < options.min_cos || v.z() < options.min_cos) continue;
-    const double e = o.irradiance.empty() ? info.light->RelativeIrradianceAt(point) : o.irradiance.at(0, row, col);
-    if (!(e > 0.0) || !std::isfinite(e)) continue;
+    if (!WorldObservationAt(context, info, index, col, row, point, &world)) continue;
     LocalObservation& lo = out[count];
-    lo.light_local = l;
-    lo.view_local = v;
-    lo.irradiance = e;
-    lo.rgb = rgb;
-    const double floor = options.noise_floor * info.level;
-    const double min_sigma = kMinSigmaFraction * info.level;  // noise_floor may be 0
-    for (int c = 0; c < 3; ++c) {
-      lo.weight(c) = 1.0 / std::max(min_sigma, floor + options.noise_relative * std::abs(rgb(c)));
-    }
-    if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(rgb) / (l.z() * e));
+    if (!ToLocalObservation(world, frame, min_cos, &lo)) continue;
+    if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(lo.rgb) / (lo.light_local.z() * lo.irradiance));
     ++count;
   }
   return count;
 }
 
-// The pixel's observations in its reconstruction normal's frame, the tangent unturned.
+// The usable observations of pixel `index` in its reconstruction normal's frame, the tangent
+// unturned; returns their number (at most stack.observations.size(), the size `out` must have).
+// Also the reflectance ratios (luminance / (cos_l E)) into `ratios` when non-null.
 int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
   return GatherPixelWithNormal(context, index, GeometryNormal(context, index), 0.0, out, ratios);
 }
+
+// RefineNormal's buffers, one per worker: grown to the stack's observation count once, then reused
+// (no allocation per pixel).
+struct NormalRefinementScratch {
+  std::vector<WorldObservation> world;
+  std::vector<double> residuals;  // 4 x 3 n_obs: the residuals, a trial's, two Jacobian columns
+};
 
 // Refines the normal of one pixel with the full Principled model at the cluster's shared `params`
 // (base colour in closed form): damped Gauss-Newton on the two tilts of the normal in the tangent
@@ -224,10 +275,13 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
 // glossy fabric its normals lean toward the highlights by about a degree; fitted with those
 // normals, the specular lobe is explained as a weaker, wider one (specular 0.5 -> 0.23 on the bump
 // field). Returns the refined unit normal, or the reconstruction's if no step lowers the cost.
-// `buffer` is scratch space of n_obs entries; `residuals` grows to 15 n_obs once per worker.
+// The pixel's observations are read from the stack once (GatherWorldObservations) and turned into
+// each trial normal's frame; the Jacobian is a forward difference (2 evaluations a step, not 4:
+// Gauss-Newton needs its direction, not its last digit, and the accepted step is checked on the
+// cost). `buffer` is scratch space of n_obs entries.
 Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
                              double rotation_deg, const PixelCostSettings& settings, int iterations,
-                             LocalObservation* buffer, std::vector<double>& residuals) {
+                             LocalObservation* buffer, NormalRefinementScratch& scratch) {
   const FitOptions& options = *context.options;
   Eigen::Vector3d n0 = GeometryNormal(context, index);
   const double length = n0.norm();
@@ -237,19 +291,29 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   const ShadingFrame axes = MakeShadingFrame(n0);
   const Eigen::Vector3d& t0 = axes.tangent;
   const Eigen::Vector3d& b0 = axes.bitangent;
-  const int count0 = GatherPixelWithNormal(context, index, n0, rotation_deg, buffer, nullptr);
+  const int gathered = GatherWorldObservations(context, index, scratch.world);
+  const std::span<const WorldObservation> world(scratch.world.data(), gathered);
+  // The observations in the frame of normal `n`; returns their number.
+  auto localize = [&](const Eigen::Vector3d& n) {
+    const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
+    int count = 0;
+    for (const WorldObservation& w : world) {
+      if (ToLocalObservation(w, frame, options.min_cos, &buffer[count])) ++count;
+    }
+    return count;
+  };
+  const int count0 = localize(n0);
   if (count0 < options.min_observations) return n0;
   const std::size_t m = 3 * static_cast<std::size_t>(count0);
-  residuals.resize(5 * m);
-  double* r = residuals.data();
-  double* rp = r + m;
-  double* rm = r + 2 * m;
-  double* jac0 = r + 3 * m;
-  double* jac1 = r + 4 * m;
+  scratch.residuals.resize(4 * m);
+  double* r = scratch.residuals.data();
+  double* trial = r + m;
+  double* jac0 = r + 2 * m;
+  double* jac1 = r + 3 * m;
   // Residuals at tilt (a, b); false when the set of usable observations changes.
   auto eval = [&](const Eigen::Vector2d& tilt, double* out, double* cost) {
     const Eigen::Vector3d n = (n0 + tilt(0) * t0 + tilt(1) * b0).normalized();
-    if (GatherPixelWithNormal(context, index, n, rotation_deg, buffer, nullptr) != count0) return false;
+    if (localize(n) != count0) return false;
     *cost = PixelResiduals(params, std::span<const LocalObservation>(buffer, count0), settings, out);
     return std::isfinite(*cost);
   };
@@ -258,15 +322,14 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   if (!eval(tilt, r, &cost)) return n0;
   const double max_tilt = std::tan(options.normal_max_change_deg * M_PI / 180.0);
   for (int iteration = 0; iteration < iterations; ++iteration) {
-    // Jacobian columns in jac0, jac1 (no allocation: all in `residuals`).
     bool ok = true;
     for (int j = 0; j < 2 && ok; ++j) {
       Eigen::Vector2d step = Eigen::Vector2d::Zero();
       step(j) = kNormalStep;
-      double cp = 0.0, cm = 0.0;
-      ok = eval(tilt + step, rp, &cp) && eval(tilt - step, rm, &cm);
+      double stepped_cost = 0.0;
+      ok = eval(tilt + step, trial, &stepped_cost);
       double* column = j == 0 ? jac0 : jac1;
-      for (std::size_t i = 0; ok && i < m; ++i) column[i] = (rp[i] - rm[i]) / (2 * kNormalStep);
+      for (std::size_t i = 0; ok && i < m; ++i) column[i] = (trial[i] - r[i]) / kNormalStep;
     }
     if (!ok) break;
     Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
@@ -284,10 +347,10 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
       Eigen::Vector2d candidate = tilt + scale * delta;
       if (candidate.norm() > max_tilt) candidate *= max_tilt / candidate.norm();
       double candidate_cost = 0.0;
-      if (eval(candidate, rp, &candidate_cost) && candidate_cost < cost) {
+      if (eval(candidate, trial, &candidate_cost) && candidate_cost < cost) {
         tilt = candidate;
         cost = candidate_cost;
-        std::copy(rp, rp + m, r);
+        std::copy(trial, trial + m, r);
         accepted = true;
         break;
       }
@@ -1195,7 +1258,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       // Normal refinement: the sampled pixels' normals refitted with the full model at the
       // cluster's parameters, then the cluster refitted on them (see RefineNormal); passes until
       // the normals stop moving (mean change below normal_refinement_tolerance_deg).
-      std::vector<double> scratch;
+      NormalRefinementScratch scratch;
       std::vector<Eigen::Vector3d> previous(take, Eigen::Vector3d::Zero());
       for (std::size_t j = 0; j < take; ++j) {
         const Eigen::Vector3d n = GeometryNormal(context, m[j * m.size() / take]);
@@ -1413,7 +1476,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
     std::int64_t local_fitted = 0, local_refined = 0;
     ParameterVector local_variance_delta{};
     float feature[kAppearanceFeatureCount];
-    std::vector<double> normal_scratch;  // RefineNormal's residuals, grown once per chunk
+    NormalRefinementScratch normal_scratch;  // RefineNormal's buffers, grown once per chunk
     const bool refine_normals = !result.normals.empty();
     for (std::size_t row = row_begin; row < row_end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
