@@ -151,7 +151,9 @@ struct PixelFunctor {
                   const T* sheen_tint, const T* anisotropic, const T* metallic, T* residuals) const {
     const T p[kFitParameterCount] = {*roughness, *specular, *specular_tint, *sheen,
                                      *sheen_tint, *anisotropic, *metallic};
-    std::vector<T> scratch;
+    // One per thread and scalar type: an evaluation does not allocate once the largest pixel has
+    // been seen.
+    thread_local std::vector<T> scratch;
     PixelResidualsT<T>(p, observations, settings, residuals, scratch);
     return true;
   }
