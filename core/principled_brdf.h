@@ -56,6 +56,19 @@ Vec3<T> Mix(const Vec3<T>& a, const Vec3<T>& b, const T& t) {
   return a + (b - a) * t;
 }
 
+// True when `x` is exactly 0, and for an automatic-differentiation Jet (a value `a` and a
+// derivative vector `v`) so is every derivative. A lobe weighted by such an x adds exactly 0 to
+// the BRDF and to each of its derivatives, so EvaluatePrincipled leaves it out: the same result to
+// the last bit (the lobes are finite above the horizon), without its cost.
+template <typename T>
+bool IsExactlyZero(const T& x) {
+  if constexpr (requires { x.a; x.v; }) {
+    return x.a == 0.0 && (x.v.array() == 0.0).all();
+  } else {
+    return x == T(0);
+  }
+}
+
 // Clamp to [0, 1]; the branch picks a value, so Jet derivatives stay those of the chosen value.
 template <typename T>
 T Clamp01(const T& x) {
@@ -196,9 +209,13 @@ Vec3<T> EvaluatePrincipled(const PrincipledParams<T>& p, const Vec3<T>& l, const
   const T cos_d = l.dot(h);
 
   // Diffuse and subsurface, mixed, then scaled by C / pi; sheen adds on top (both dielectric only).
+  // Fabric fits and renders have no subsurface and no clearcoat: those lobes are skipped when
+  // their weights are exactly 0 (IsExactlyZero), about a third of the evaluation.
   const T fd = brdf::DisneyDiffuse(cos_l, cos_v, cos_d, p.roughness);
-  const T ss = brdf::DisneySubsurface(cos_l, cos_v, cos_d, p.roughness);
-  const T diffuse_weight = brdf::Mix(fd, ss, p.subsurface) / T(brdf::kPi);
+  const T diffuse_weight =
+      (brdf::IsExactlyZero(p.subsurface) ? fd
+                                         : brdf::Mix(fd, brdf::DisneySubsurface(cos_l, cos_v, cos_d, p.roughness), p.subsurface)) /
+      T(brdf::kPi);
   const Vec3<T> dielectric = p.base_color * diffuse_weight + brdf::SheenLobe(p, cos_d);
 
   T alpha_x, alpha_y;
@@ -207,8 +224,9 @@ Vec3<T> EvaluatePrincipled(const PrincipledParams<T>& p, const Vec3<T>& l, const
   const T g = brdf::SmithGgxAnisotropicG1(l, alpha_x, alpha_y) * brdf::SmithGgxAnisotropicG1(v, alpha_x, alpha_y);
   const Vec3<T> f = brdf::SchlickFresnel(brdf::SpecularF0(p), cos_d);
 
-  const T clearcoat = brdf::ClearcoatLobe(p, cos_l, cos_v, cos_h, cos_d);
-  return dielectric * (T(1) - p.metallic) + f * (g * d) + Vec3<T>::Constant(clearcoat);
+  const Vec3<T> lobes = dielectric * (T(1) - p.metallic) + f * (g * d);
+  if (brdf::IsExactlyZero(p.clearcoat)) return lobes;
+  return lobes + Vec3<T>::Constant(brdf::ClearcoatLobe(p, cos_l, cos_v, cos_h, cos_d));
 }
 
 }  // namespace u3mscan

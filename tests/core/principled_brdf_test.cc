@@ -136,7 +136,9 @@ TEST(PrincipledBrdf, WhiteFurnaceWithinKnownBounds) {
       const double a_metal = DirectionalAlbedo(metal, v)(0);
       EXPECT_LE(a_metal, kSpecularAlbedoBound) << "roughness " << roughness << " theta_v " << theta_v;
       // Where the quadrature resolves the lobe and masking is mild, most energy is reflected.
-      if (roughness >= 0.3 && roughness <= 0.6 && theta_v <= 60.0) EXPECT_GT(a_metal, 0.7);
+      if (roughness >= 0.3 && roughness <= 0.6 && theta_v <= 60.0) {
+        EXPECT_GT(a_metal, 0.7);
+      }
     }
   }
 }
@@ -218,6 +220,40 @@ TEST(PrincipledBrdf, JetValueEqualsDoubleValueAndGradientMatchesFiniteDifference
     for (int c = 0; c < 3; ++c) {
       const double scale = std::max({1e-3, std::abs(fd(c)), std::abs(fj(c).v[10])});
       EXPECT_NEAR(fj(c).v[10], fd(c), kGradientRelativeTolerance * scale) << "base colour, trial " << trial;
+    }
+  }
+}
+
+// EvaluatePrincipled leaves out the subsurface and clearcoat lobes when their weights are exactly
+// 0 (brdf::IsExactlyZero). Both lobes evaluated with a weight of 0 add exactly nothing (the
+// terms below, to the last bit), and a Jet weight whose value is 0 but whose derivative is not is
+// still evaluated and differentiated:
+// d f / d subsurface = C (ss - fd) / pi and d f / d clearcoat = the clearcoat lobe at weight 1.
+TEST(PrincipledBrdf, LobesOfWeightZeroAreLeftOutExactlyButStillDifferentiated) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 100; ++trial) {
+    auto p = RandomParams(rng);
+    p.subsurface = 0.0;
+    p.clearcoat = 0.0;
+    const Vec3d l = RandomUpperDirection(rng), v = RandomUpperDirection(rng);
+    const Vec3d f = EvaluatePrincipled(p, l, v);
+    // The skipped lobes' terms as the full formula adds them (Mix and the clearcoat sum).
+    const Vec3d h = (l + v).normalized();
+    const double fd = brdf::DisneyDiffuse(l.z(), v.z(), l.dot(h), p.roughness);
+    const double ss = brdf::DisneySubsurface(l.z(), v.z(), l.dot(h), p.roughness);
+    EXPECT_EQ(brdf::Mix(fd, ss, p.subsurface), fd) << "trial " << trial;
+    EXPECT_EQ(brdf::ClearcoatLobe(p, l.z(), v.z(), h.z(), l.dot(h)), 0.0) << "trial " << trial;
+
+    const Vec3<Jet> fj = EvaluatePrincipled(ToJet(p), Vec3<Jet>(l.cast<Jet>()), Vec3<Jet>(v.cast<Jet>()));
+    auto coated = p;
+    coated.clearcoat = 1.0;
+    const double clearcoat_lobe = brdf::ClearcoatLobe(coated, l.z(), v.z(), h.z(), l.dot(h));
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(fj(c).a, f(c), kJetValueTolerance * std::max(1.0, f(c))) << "trial " << trial;
+      const double d_subsurface = p.base_color(c) * (ss - fd) / brdf::kPi * (1.0 - p.metallic);
+      EXPECT_NEAR(fj(c).v[1], d_subsurface, kJetValueTolerance) << "subsurface, channel " << c << " trial " << trial;
+      EXPECT_NEAR(fj(c).v[8], clearcoat_lobe, kJetValueTolerance * std::max(1.0, clearcoat_lobe))
+          << "clearcoat, channel " << c << " trial " << trial;
     }
   }
 }
