@@ -7,6 +7,7 @@
 
 #include "cli/command.h"
 #include "core/error.h"
+#include "core/large_allocations.h"
 #include "core/logging.h"
 #include "u3mscan/version.h"
 
@@ -20,6 +21,7 @@ std::vector<Command>& CommandTable() {
 int main(int argc, char** argv) {
   using namespace u3mscan;
   using namespace u3mscan::cli;
+  KeepLargeAllocationsInTheHeap();  // before any image is allocated (core/large_allocations.h)
 
   CLI::App app{
       "u3mscan: turns multi-light photographs of a fabric (a capture folder) into a complete U3M "
