@@ -121,7 +121,6 @@ void BM_Integration(benchmark::State& state) {
 }
 BENCHMARK(BM_Integration)->Args({256, 0})->Args({1024, 0})->Args({256, 1})->Args({1024, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
-
 // The fit of `FitPrincipled` with its default options (clusters, observability, then every pixel's
 // normal refined and its colour solved) on the glossy bump field, started from the true normals.
 void BM_FitPrincipled(benchmark::State& state) {

@@ -278,13 +278,15 @@ struct NormalRefinementScratch {
 // The pixel's observations are read from the stack once (GatherWorldObservations) and turned into
 // each trial normal's frame; the Jacobian is a forward difference (2 evaluations a step, not 4:
 // Gauss-Newton needs its direction, not its last digit, and the accepted step is checked on the
-// cost). `buffer` is scratch space of n_obs entries.
+// cost). `buffer` (n_obs entries) ends holding the pixel's usable observations in the returned
+// normal's frame, as GatherPixelWithNormal gives them, and `*count` their number.
 Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
                              double rotation_deg, const PixelCostSettings& settings, int iterations,
-                             LocalObservation* buffer, NormalRefinementScratch& scratch) {
+                             LocalObservation* buffer, NormalRefinementScratch& scratch, int* count) {
   const FitOptions& options = *context.options;
   Eigen::Vector3d n0 = GeometryNormal(context, index);
   const double length = n0.norm();
+  *count = 0;
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return n0;
   n0 /= length;
   // The two tilt directions: the unturned shading frame's tangent and bitangent.
@@ -302,8 +304,13 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
     }
     return count;
   };
+  // `n` with `buffer` and `*count` set for it (normalised again, as GatherPixelWithNormal does).
+  auto finish = [&](const Eigen::Vector3d& n) {
+    *count = localize(n / n.norm());
+    return n;
+  };
   const int count0 = localize(n0);
-  if (count0 < options.min_observations) return n0;
+  if (count0 < options.min_observations) return finish(n0);
   const std::size_t m = 3 * static_cast<std::size_t>(count0);
   scratch.residuals.resize(4 * m);
   double* r = scratch.residuals.data();
@@ -319,7 +326,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   };
   Eigen::Vector2d tilt = Eigen::Vector2d::Zero();
   double cost = 0.0;
-  if (!eval(tilt, r, &cost)) return n0;
+  if (!eval(tilt, r, &cost)) return finish(n0);
   const double max_tilt = std::tan(options.normal_max_change_deg * M_PI / 180.0);
   for (int iteration = 0; iteration < iterations; ++iteration) {
     bool ok = true;
@@ -357,7 +364,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
     }
     if (!accepted || delta.norm() < kNormalConvergedTilt) break;
   }
-  return (n0 + tilt(0) * t0 + tilt(1) * b0).normalized();
+  return finish((n0 + tilt(0) * t0 + tilt(1) * b0).normalized());
 }
 
 // Albedo of a pixel for clustering: the reconstruction's, else the per-channel median ratio.
@@ -1286,12 +1293,12 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
           if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
           const PixelCostSettings settings =
               Settings(options, params, free, std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color)));
-          const Eigen::Vector3d n =
-              RefineNormal(context, index, params, rotation_deg, settings, options.normal_iterations, buffer.data(), scratch);
+          int count = 0;
+          const Eigen::Vector3d n = RefineNormal(context, index, params, rotation_deg, settings,
+                                                 options.normal_iterations, buffer.data(), scratch, &count);
           change_sum += std::atan2(n.cross(previous[j]).norm(), n.dot(previous[j])) * 180.0 / M_PI;
           ++changed;
           previous[j] = n;
-          const int count = GatherPixelWithNormal(context, index, n, rotation_deg, buffer.data(), nullptr);
           if (count < options.min_observations) continue;
           refined.observations.insert(refined.observations.end(), buffer.begin(), buffer.begin() + count);
           refined.offsets.push_back(refined.observations.size());
@@ -1509,11 +1516,10 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
           // The pixel's normal with the full model at its cluster's parameters (as the cluster
           // samples' in FitClusterModel), then its colour and own parameters on that normal.
           const PixelCostSettings settings = Settings(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]);
+          // It leaves the pixel's observations in the refined normal's frame in the buffer.
           const Eigen::Vector3d n = RefineNormal(context, index, cluster_params[c], rotation_deg, settings,
                                                  options.pixel_normal_iterations, buffers.observations.data(),
-                                                 normal_scratch);
-          // RefineNormal keeps the set of usable observations, so the count is unchanged.
-          count = GatherPixelWithNormal(context, index, n, rotation_deg, buffers.observations.data(), nullptr);
+                                                 normal_scratch, &count);
           for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
         }
         const std::span<const LocalObservation> obs(buffers.observations.data(), count);
