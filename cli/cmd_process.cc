@@ -79,11 +79,15 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "where its surface point lies in plan (for comparisons; docs/reconstruction.md, Placing the fine "
                "pixels on the plan)");
   sub.add_option("--level", args->options.levelling,
-                 "The sample's low-order shape taken out of the height and normal maps: none | plane (a tilt) | "
+                 "The sample's low-order shape taken out of the height map: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "
                  "sample's real relief over its whole width, docs/process.md, Levelling)")
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "plane", "quadratic"}));
+  sub.add_flag("--level-normals", args->options.level_normals,
+               "Also turn the normal map by the tilt --level removes (a sample lying tilted on the bed). Off: the "
+               "normals are kept as measured, since a fabric whose facets slope more one way (knit) has a mean "
+               "slope of its own (docs/process.md, Levelling)");
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
                  "separately, of the RAW decode cache (docs/process.md, Large scans)")

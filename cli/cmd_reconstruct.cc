@@ -22,6 +22,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     double dpi = 0.0;
     int ps_supersample = 0;
     bool no_cast_shadows = false;
+    bool level_normals = false;
   };
   auto args = std::make_shared<Args>();
   sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
@@ -44,10 +45,12 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
   sub.add_flag("--no-cast-shadows", args->no_cast_shadows,
                "Do not mark cast shadows from the heights (they stay dark or outlier data for the solver)");
   sub.add_option("--level", args->level,
-                 "The sample's low-order shape taken out of the height and normal maps written: none | plane | quadratic "
+                 "The sample's low-order shape taken out of the height map written: none | plane | quadratic "
                  "(as `process --level`, docs/process.md, Levelling)")
       ->capture_default_str()
       ->check(CLI::IsMember({"none", "plane", "quadratic"}));
+  sub.add_flag("--level-normals", args->level_normals,
+               "Also turn the normal map by the tilt --level removes (as `process --level-normals`)");
   sub.footer(
       "Writes DIR/maps/normal.exr (float, unit, world frame: x right, y up, z toward the camera),\n"
       "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).");
@@ -74,7 +77,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     SideReconstruction result =
         ReconstructSideSupersampled(prepared, args->side, k, &stack, stages, Image(), &report, bar.Callback());
     report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(args->level), args->side, result.valid,
-                                         &result.height_mm, &result.photometric_stereo.normal));
+                                         &result.height_mm, args->level_normals ? &result.photometric_stereo.normal : nullptr));
     bar.Finish();
     const auto& ps = result.photometric_stereo;
     WriteStageOutputs(args->out,

@@ -105,6 +105,7 @@ nlohmann::json CustomSection(const PreparedCapture& prepared, const ProcessOptio
                           {"integrator", options.integrator.empty() ? "preset" : options.integrator},
                           {"fit_mode", options.fit_mode.empty() ? "preset" : options.fit_mode},
                           {"levelling", options.levelling},
+                          {"level_normals", options.level_normals},
                           {"dpi", prepared.calibration.grid.dpi()},
                           {"surface_z_mm", prepared.calibration.surface_z_mm}};
   nlohmann::json cameras = nlohmann::json::array();
@@ -232,6 +233,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"max_memory_gib", options.max_memory_gib},
                     {"ps_supersample", options.ps_supersample},
                     {"levelling", options.levelling},
+                    {"level_normals", options.level_normals},
                     {"fit_clusters_on_fine_grid", stages.fit_clusters_on_fine_grid},
                     {"base_colour_from_fine_grid", stages.base_colour_from_fine_grid},
                     {"plan_placement", stages.place_fine_pixels_on_plan},
@@ -373,10 +375,11 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
-    // The sample's tilt (or bowl) out of the written maps; every stage above used the heights as integrated.
+    // The sample's tilt (or bowl) out of the written height, and its tilt out of the normals when
+    // asked (--level-normals); every stage above used the heights as integrated.
     const Image& level_weight = reconstruction.valid.empty() ? alpha : reconstruction.valid;
     report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(options.levelling), side, level_weight,
-                                         &maps.height_mm, &maps.normal));
+                                         &maps.height_mm, options.level_normals ? &maps.normal : nullptr));
     maps.height_unreliable_reason = HeightUnreliableReason(reconstruction.photometric_stereo);
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       maps.scalars.push_back(ChoiceFromDecision(kU3mKeyOfFitParameter[p], fit.maps[p], fit.parameter_maps[p], grid.pitch_mm,

@@ -190,9 +190,10 @@ StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string&
   const double start = StageClock();
   const reconstruction::LevellingResult removed = reconstruction::LevelRelief(levelling, height_mm, normal, valid);
   if (removed.weighted_pixels <= 0.0) return {name, false, "too few valid pixels to fit a " + reconstruction::LevellingName(levelling), 0.0};
-  char detail[200];
-  std::snprintf(detail, sizeof detail, "%s removed: %.1f um peak to valley, tilt up to %.3f deg",
-                reconstruction::LevellingName(levelling).c_str(), 1000.0 * removed.peak_to_valley_mm, removed.max_tilt_deg);
+  char detail[240];
+  std::snprintf(detail, sizeof detail, "%s removed: %.1f um peak to valley, tilt up to %.3f deg; normals %s",
+                reconstruction::LevellingName(levelling).c_str(), 1000.0 * removed.peak_to_valley_mm, removed.max_tilt_deg,
+                normal ? "turned by the tilt (--level-normals)" : "kept as measured");
   return {name, true, detail, StageClock() - start};
 }
 

@@ -87,9 +87,10 @@ StepRecord CastShadowStep(const StageOptions& options, double share, bool near, 
 bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
                         SideReconstruction* side, RunReport* report, const ProgressCallback& progress = {});
 
-// The "level" step of a side: its written height and normal maps levelled
-// (reconstruction::LevelRelief), weighted by `valid` (1 where the surface is data; empty = every
-// pixel). The step says what was removed: the surface's peak to valley (um) and largest tilt.
+// The "level" step of a side: its written height levelled (reconstruction::LevelRelief), and its
+// normals turned by the removed tilt when `normal` is not null, weighted by `valid` (1 where the
+// surface is data; empty = every pixel). The step says what was removed (the surface's peak to
+// valley in um and largest tilt) and whether the normals were turned.
 StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string& side, const Image& valid, Image* height_mm,
                          Image* normal);
 

@@ -15,11 +15,14 @@
 // Frames and units (docs/capture-format.md): columns grow with +x, rows grow with -y, +z toward
 // the camera; heights in mm, the pitch in mm per pixel from the height map.
 //
-// The normals are rotated by the removed tilt (the plane's part, a rigid pose of the sample) and
-// not by the bowl: the bowl is the integral of the steep yarn flanks' slope errors, not a lean of
-// every normal. Measured on plain at 3x: the map's mean slope error leaned 0.29 deg at the edges,
-// but rotating every normal by the bowl made the normal map worse (1.351 -> 1.364 deg mean), where
-// the levelled height came from 7.6 % to 1.6 % of the range.
+// The normals, when given, are rotated by the removed tilt (the plane's part, a rigid pose of the
+// sample) and not by the bowl. `process` and `reconstruct` give them only with --level-normals: a
+// fabric whose facets slope more one way (knit) has normals with a mean slope of their own, and
+// the height's tilt is then their integral, not a pose (docs/process.md, "Levelling"). Not by
+// the bowl: the bowl is the integral of the steep yarn flanks' slope errors, not a lean of every
+// normal. Measured on plain at 3x: the map's mean slope error leaned 0.29 deg at the edges, but
+// rotating every normal by the bowl made the normal map worse (1.351 -> 1.364 deg mean), where the
+// levelled height came from 7.6 % to 1.6 % of the range.
 
 #include <array>
 #include <string>

@@ -280,9 +280,11 @@ TEST_F(ProcessCli, PsSupersampleIsCheckedAndReconstructTakesIt) {
 }
 
 // --level: a value out of the list is refused before anything is written; the default levels a
-// plane out of the written height (the step says so), and `none` keeps the shape: the plane run's
-// height is the none run's with its plane removed, and its normals the none run's turned by that
-// tilt (reconstruction/relief_levelling.h; the kernel's own tests are ReliefLevelling.*).
+// plane out of the written height (the step says so) and keeps the normals as measured, `none`
+// keeps the shape, and --level-normals also turns the normals: the plane run's height is the none
+// run's with its plane removed, its normals the none run's, and the --level-normals run's normals
+// the none run's turned by that tilt (reconstruction/relief_levelling.h; the kernel's own tests
+// are ReliefLevelling.*).
 TEST_F(ProcessCli, LevelIsCheckedAndTakesTheTiltOut) {
   // Heights written as float EXR from the same run but for the levelling: float32 round-off of
   // heights below a millimetre and of unit normals.
@@ -292,6 +294,7 @@ TEST_F(ProcessCli, LevelIsCheckedAndTakesTheTiltOut) {
   EXPECT_FALSE(fs::exists(root_ / "level_bad"));
   ASSERT_EQ(RunShell(FastProcessOfA("--debug-maps", "level_plane")), 0);
   ASSERT_EQ(RunShell(FastProcessOfA("--debug-maps --level none", "level_none")), 0);
+  ASSERT_EQ(RunShell(FastProcessOfA("--debug-maps --level-normals", "level_plane_normals")), 0);
 
   auto report_of = [&](const std::string& out) {
     std::ifstream in(root_ / out / "report.json");
@@ -304,37 +307,51 @@ TEST_F(ProcessCli, LevelIsCheckedAndTakesTheTiltOut) {
     }
     return nlohmann::json();
   };
-  const nlohmann::json plane_step = step("level_plane"), none_step = step("level_none");
+  const nlohmann::json plane_step = step("level_plane"), none_step = step("level_none"),
+                       turned_step = step("level_plane_normals");
   // The maps' pitch (the EXR files do not carry it): the slopes the normals turn by depend on it.
   const double pitch_mm = report_of("level_none")["calibration"]["grid"]["pitch_mm"].get<double>();
   ASSERT_FALSE(plane_step.is_null());
   EXPECT_TRUE(plane_step["ran"].get<bool>());
   EXPECT_NE(plane_step["reason"].get<std::string>().find("plane removed"), std::string::npos) << plane_step.dump();
+  EXPECT_NE(plane_step["reason"].get<std::string>().find("normals kept"), std::string::npos) << plane_step.dump();
+  ASSERT_FALSE(turned_step.is_null());
+  EXPECT_NE(turned_step["reason"].get<std::string>().find("normals turned"), std::string::npos) << turned_step.dump();
+  EXPECT_TRUE(report_of("level_plane_normals")["options"]["level_normals"].get<bool>());
   ASSERT_FALSE(none_step.is_null());
   EXPECT_FALSE(none_step["ran"].get<bool>());
 
-  Image none_height = ReadImageFile(root_ / "level_none" / "maps" / "height.exr", PixelEncoding::kLinear);
-  Image none_normal = ReadImageFile(root_ / "level_none" / "maps" / "normal.exr", PixelEncoding::kLinear);
-  const Image plane_height = ReadImageFile(root_ / "level_plane" / "maps" / "height.exr", PixelEncoding::kLinear);
-  const Image plane_normal = ReadImageFile(root_ / "level_plane" / "maps" / "normal.exr", PixelEncoding::kLinear);
+  auto read = [&](const std::string& out, const char* map) {
+    return ReadImageFile(root_ / out / "maps" / map, PixelEncoding::kLinear);
+  };
+  Image none_height = read("level_none", "height.exr");
+  const Image none_normal = read("level_none", "normal.exr");
+  Image turned_normal = none_normal;
+  const Image plane_height = read("level_plane", "height.exr");
+  const Image plane_normal = read("level_plane", "normal.exr");
+  const Image written_turned_normal = read("level_plane_normals", "normal.exr");
   ASSERT_EQ(none_height.width(), plane_height.width());
   ASSERT_EQ(none_height.height(), plane_height.height());
   none_height.set_pitch_mm(pitch_mm);
-  const reconstruction::LevellingResult tilt = reconstruction::LevelRelief(reconstruction::Levelling::kPlane, &none_height, &none_normal);
+  const reconstruction::LevellingResult tilt = reconstruction::LevelRelief(reconstruction::Levelling::kPlane, &none_height, &turned_normal);
   ASSERT_GT(tilt.weighted_pixels, 0.0);
   EXPECT_GT(tilt.peak_to_valley_mm, 0.0) << "the capture's height has some tilt to take out";
   double worst_mm = 0.0;
-  float worst_normal = 0.0f;
+  float worst_kept = 0.0f, worst_turned = 0.0f, turn = 0.0f;
   for (int r = 0; r < none_height.height(); ++r) {
     for (int c = 0; c < none_height.width(); ++c) {
       worst_mm = std::max(worst_mm, std::abs(static_cast<double>(none_height.at(0, r, c)) - plane_height.at(0, r, c)));
       for (int ch = 0; ch < 3; ++ch) {
-        worst_normal = std::max(worst_normal, std::abs(none_normal.at(ch, r, c) - plane_normal.at(ch, r, c)));
+        worst_kept = std::max(worst_kept, std::abs(none_normal.at(ch, r, c) - plane_normal.at(ch, r, c)));
+        worst_turned = std::max(worst_turned, std::abs(turned_normal.at(ch, r, c) - written_turned_normal.at(ch, r, c)));
+        turn = std::max(turn, std::abs(turned_normal.at(ch, r, c) - none_normal.at(ch, r, c)));
       }
     }
   }
   EXPECT_LT(worst_mm, kSameRunToleranceMm);
-  EXPECT_LT(worst_normal, kSameRunNormalTolerance);
+  EXPECT_LT(worst_kept, kSameRunNormalTolerance) << "the default keeps the normals as measured";
+  EXPECT_LT(worst_turned, kSameRunNormalTolerance) << "--level-normals turns them by the removed tilt";
+  EXPECT_GT(turn, 10.0f * kSameRunNormalTolerance) << "the tilt turns the normals by more than round-off";
 }
 
 }  // namespace
