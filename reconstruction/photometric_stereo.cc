@@ -1,6 +1,5 @@
 #include "reconstruction/photometric_stereo.h"
 
-#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
@@ -103,10 +102,22 @@ struct PixelObservation {
 
 struct Scratch {
   std::vector<PixelObservation> obs;
-  std::vector<double> values;  // for medians
-  std::vector<int> order;      // for band selection
-  explicit Scratch(std::size_t k) : obs(k), values(k), order(k) {}
+  std::vector<double> values;    // for medians
+  std::vector<double> per_obs;   // one value per observation: band keys, then IRLS residuals
+  std::vector<int> order;        // for band selection
+  explicit Scratch(std::size_t k) : obs(k), values(k), per_obs(k), order(k) {}
 };
+
+// B = A^-1 R for the 3x3 normal equations A (symmetric, positive semi-definite by construction)
+// in closed form (cofactors: no factorisation, no triangular solves); false, B untouched, when A
+// is too close to singular: det(A) <= 1e-12 trace(A)^3 (fewer than 3 independent lights).
+bool SolveNormalEquations(const Matrix3d& a, const Matrix3d& r, Matrix3d* b) {
+  const double scale = a.trace();
+  const double det = a.determinant();
+  if (!(det > 1e-12 * scale * scale * scale)) return false;
+  *b = a.inverse() * r;
+  return true;
+}
 
 // The weighted normal equations of one pixel and their eigen-decomposition.
 struct PixelSystem {
@@ -118,16 +129,26 @@ struct PixelSystem {
 
   // decompose = false skips the eigen-decomposition (IRLS rounds solve with a Cholesky factor;
   // only the final system needs eigenvalues for the condition number and the pseudo-inverse).
+  // The sums are kept in scalars, A's upper triangle only (it is symmetric): an IRLS round
+  // rebuilds this system, and the rounds are most of photometric stereo's time.
   void Build(const std::vector<PixelObservation>& obs, bool decompose = true) {
-    a.setZero();
-    r.setZero();
+    double a00 = 0.0, a01 = 0.0, a02 = 0.0, a11 = 0.0, a12 = 0.0, a22 = 0.0;
+    Matrix3d sum_r = Matrix3d::Zero();
     weight_sum = 0.0;
     for (const PixelObservation& o : obs) {
       if (o.weight <= 0.0) continue;
-      a.noalias() += o.weight * o.s * o.s.transpose();
-      r.noalias() += o.weight * o.s * o.rgb.transpose();
+      const Vector3d ws = o.weight * o.s;
+      a00 += ws.x() * o.s.x();
+      a01 += ws.x() * o.s.y();
+      a02 += ws.x() * o.s.z();
+      a11 += ws.y() * o.s.y();
+      a12 += ws.y() * o.s.z();
+      a22 += ws.z() * o.s.z();
+      sum_r.noalias() += ws * o.rgb.transpose();
       weight_sum += o.weight;
     }
+    a << a00, a01, a02, a01, a11, a12, a02, a12, a22;
+    r = sum_r;
     if (decompose) Decompose();
   }
 
@@ -268,18 +289,25 @@ class Solver {
       return;
     }
     // Band selection: sort the candidates by shading, leave out the darkest and brightest.
+    std::vector<double>& per_obs = scratch.per_obs;
     int n = 0;
-    for (std::size_t j = 0; j < k; ++j)
-      if (obs[j].candidate) scratch.order[n++] = static_cast<int>(j);
-    std::sort(scratch.order.begin(), scratch.order.begin() + n,
-              [&](int a, int b) { return obs[a].grey * obs[a].inv_e < obs[b].grey * obs[b].inv_e; });
+    for (std::size_t j = 0; j < k; ++j) {
+      if (!obs[j].candidate) continue;
+      per_obs[j] = obs[j].grey * obs[j].inv_e;  // the sort key, computed once
+      scratch.order[n++] = static_cast<int>(j);
+    }
+    std::sort(scratch.order.begin(), scratch.order.begin() + n, [&](int a, int b) { return per_obs[a] < per_obs[b]; });
     int low = static_cast<int>(n * options_.band_low_fraction);
     int high = static_cast<int>(n * options_.band_high_fraction);
     const int keep = std::min(n, 4);
     while (n - low - high < keep && (low > 0 || high > 0)) (low >= high ? low : high)--;
     for (int i = 0; i < n; ++i) obs[scratch.order[i]].weight = (i >= low && i < n - high) ? 1.0 : 0.0;
-    sys.Build(obs);
-    Matrix3d b = sys.Solve();
+    sys.Build(obs, /*decompose=*/false);
+    Matrix3d b;
+    if (!SolveNormalEquations(sys.a, sys.r, &b)) {
+      sys.Decompose();
+      b = sys.Solve();  // the pseudo-inverse: what a nearly coplanar band constrains
+    }
     // IRLS over all candidates from the band estimate.
     for (int it = 0; it < options_.irls_iterations; ++it) {
       const Vector3d bg = b.rowwise().mean();
@@ -287,18 +315,22 @@ class Solver {
       if (!(b_norm > 0.0)) break;
       std::size_t m = 0;
       // Residual of an observation: its worst channel, in shading units, so that a clip or a
-      // tint in one channel counts in full.
-      auto residual = [&](const PixelObservation& o) { return (o.rgb - b.transpose() * o.s).cwiseAbs().maxCoeff() * o.inv_e; };
-      for (const auto& o : obs) {
-        if (!o.candidate || o.s.dot(bg) <= 0.0) continue;
-        scratch.values[m++] = residual(o);
+      // tint in one channel counts in full. -1 marks an attached shadow (the linear model
+      // predicts a negative value the camera cannot see) or a non-candidate: weight 0.
+      for (std::size_t j = 0; j < k; ++j) {
+        const PixelObservation& o = obs[j];
+        if (!o.candidate || o.s.dot(bg) <= 0.0) {
+          per_obs[j] = -1.0;
+          continue;
+        }
+        per_obs[j] = (o.rgb - b.transpose() * o.s).cwiseAbs().maxCoeff() * o.inv_e;
+        scratch.values[m++] = per_obs[j];
       }
       const double sigma = std::max(QuantileToSigma(options_.residual_quantile) * Quantile(scratch.values, m, options_.residual_quantile), options_.min_residual_fraction * b_norm);
       double change = 0.0;
-      for (auto& o : obs) {
-        double w = 0.0;
-        // Attached shadow: the linear model predicts a negative value the camera cannot see.
-        if (o.candidate && o.s.dot(bg) > 0.0) w = RobustWeight(options_.loss, residual(o), sigma);
+      for (std::size_t j = 0; j < k; ++j) {
+        PixelObservation& o = obs[j];
+        const double w = per_obs[j] >= 0.0 ? RobustWeight(options_.loss, per_obs[j], sigma) : 0.0;
         change = std::max(change, std::fabs(w - o.weight));
         o.previous_weight = o.weight;
         o.weight = w;
@@ -306,16 +338,13 @@ class Solver {
       PixelSystem next;
       next.Build(obs, /*decompose=*/false);
       // Weights left fewer than 3 independent lights: keep the last good system.
-      const Eigen::LLT<Matrix3d> llt(next.a);
-      const double scale = next.a.trace();
-      if (llt.info() != Eigen::Success || !(next.a.determinant() > 1e-12 * scale * scale * scale)) {
+      if (!SolveNormalEquations(next.a, next.r, &b)) {
         for (auto& o : obs) o.weight = o.previous_weight;  // weights and system stay consistent
         break;
       }
       sys.a = next.a;
       sys.r = next.r;
       sys.weight_sum = next.weight_sum;
-      b = llt.solve(next.r);
       if (change < 1e-3) break;
     }
     sys.Decompose();
