@@ -127,8 +127,8 @@ struct PixelSystem {
   Matrix3d eigenvectors = Matrix3d::Identity();
   double weight_sum = 0.0;
 
-  // decompose = false skips the eigen-decomposition (IRLS rounds solve with a Cholesky factor;
-  // only the final system needs eigenvalues for the condition number and the pseudo-inverse).
+  // decompose = false skips the eigen-decomposition (IRLS rounds solve in closed form,
+  // SolveNormalEquations; only the final system needs eigenvalues for the condition number and the pseudo-inverse).
   // The sums are kept in scalars, A's upper triangle only (it is symmetric): an IRLS round
   // rebuilds this system, and the rounds are most of photometric stereo's time.
   void Build(const std::vector<PixelObservation>& obs, bool decompose = true) {
