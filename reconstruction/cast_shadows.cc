@@ -214,9 +214,9 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
   ShadowMarkingSummary local;
   ShadowMarkingSummary& out = summary ? *summary : local;
   out = {};
-  const bool near = options.refine_height &&
-                    std::any_of(stack->lights.begin(), stack->lights.end(),
-                                [](const LightModel& l) { return l.type == LightType::kPoint; });
+  const bool point_lights = std::any_of(stack->lights.begin(), stack->lights.end(),
+                                        [](const LightModel& l) { return l.type == LightType::kPoint; });
+  const bool near = options.refine_height && point_lights;
   IntegrationOptions integration = options.integration;
   integration.pitch_mm = stack->grid.pitch_mm;
 
@@ -247,8 +247,12 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
     // Nothing marked (e.g. lights high enough for the relief): the first solve stands.
     if (out.counts.marked == 0) return result;
     // Distant lights do not depend on the height; near lights without refinement stay on the plane.
+    // Only the pixels with a mark (and those solved from their neighbours) can change: the others
+    // keep the first solve (a third to a half of the solve's time on woven captures).
     const Image kept_height = std::move(result.height_mm);
-    result = SolvePhotometricStereoAt(*stack, again, kept_height.empty() ? height : kept_height);
+    const Image& solve_height = kept_height.empty() ? height : kept_height;
+    result = point_lights ? SolvePhotometricStereoAt(*stack, again, solve_height)
+                                    : SolvePhotometricStereoAgain(*stack, again, solve_height, result, kCastShadow);
     result.height_mm = kept_height;
     result.diffuse_roughness = roughness;
     return result;

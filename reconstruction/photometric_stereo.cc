@@ -81,6 +81,7 @@ enum PixelState : std::uint8_t {
   kClamped = 1u << 3,
   kRegularised = 1u << 4,
   kLowConfidence = 1u << 5,  // pass-1 confidence below regularise_below_confidence
+  kSecondPass = 1u << 6,     // solved again in pass 2, with its neighbours' normal at hand
 };
 // Pixels whose first-pass estimate is not to be trusted alone: re-solved with the neighbour prior.
 constexpr std::uint8_t kNeedsNeighbours = kDark | kIllConditioned | kLowAlbedo | kLowConfidence;
@@ -592,9 +593,17 @@ void CheckStack(const Stack& stack, const PhotometricStereoOptions& options) {
   }
 }
 
-// One full solve with every pixel at the given height (mm).
+// What SolveAt may keep of an earlier solve of the same stack (SolvePhotometricStereoAgain).
+struct EarlierSolve {
+  const PhotometricStereoResult* result = nullptr;  // null: solve every pixel
+  std::uint8_t changed_flag = 0;                    // observations flagged so since then
+};
+
+// One full solve with every pixel at the given height (mm); with `earlier`, a pixel whose
+// observations carry no `changed_flag` and that the earlier solve did not solve in its second
+// pass (with the neighbours) keeps the earlier estimate.
 PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const PhotometricStereoOptions& options,
-                                const Image& height_mm) {
+                                const Image& height_mm, const EarlierSolve& earlier = {}) {
   const int w = stack.grid.width, h = stack.grid.height;
   const std::size_t n = static_cast<std::size_t>(w) * h;
   const double pitch = stack.grid.pitch_mm;
@@ -606,6 +615,25 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   res.used_lights = Image(w, h, 1, 0.0f, pitch);
   std::vector<std::uint8_t> state(n, 0);
   auto height_at = [&](std::size_t i) { return static_cast<double>(height_mm.data()[i]); };
+  // The earlier estimate of pixel i, when it stands (see above).
+  const PhotometricStereoResult* before = earlier.result;
+  auto keeps_earlier = [&](std::size_t i) {
+    if (before == nullptr || (before->pixel_states[i] & kSecondPass) != 0) return false;
+    for (const Observation& o : stack.observations) {
+      if (!o.flags.empty() && (o.flags[i] & earlier.changed_flag) != 0) return false;
+    }
+    return true;
+  };
+  auto keep_earlier = [&](std::size_t i) {
+    for (int c = 0; c < 3; ++c) {
+      res.normal.data()[c * n + i] = before->normal.data()[c * n + i];
+      res.albedo.data()[c * n + i] = before->albedo.data()[c * n + i];
+    }
+    res.confidence.data()[i] = before->confidence.data()[i];
+    res.condition_number.data()[i] = before->condition_number.data()[i];
+    res.used_lights.data()[i] = before->used_lights.data()[i];
+    state[i] = before->pixel_states[i];
+  };
   auto store = [&](std::size_t i, const PixelEstimate& est, const Vector3d& albedo) {
     for (int c = 0; c < 3; ++c) {
       res.normal.data()[c * n + i] = static_cast<float>(est.normal(c));
@@ -626,6 +654,10 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
     for (std::size_t r = r0; r < r1; ++r)
       for (int c = 0; c < w; ++c) {
         const std::size_t i = r * w + c;
+        if (keeps_earlier(i)) {
+          keep_earlier(i);
+          continue;
+        }
         PixelEstimate est;
         Vector3d albedo = Vector3d::Zero();
         if (solver.Gather(static_cast<int>(r), c, height_at(i), scratch) == 0) {
@@ -669,6 +701,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
             solver.Gather(static_cast<int>(r), c, height_at(i), scratch);
             SolvePixel(solver, options, scratch, sys, &p, est, albedo, (state[i] & kLowConfidence) != 0);
           }
+          est.state |= kSecondPass;
           store(i, est, albedo);
         }
     });
@@ -680,6 +713,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
     res.clamped_normal_pixels += (state[i] & kClamped) != 0;
     res.regularised_pixels += (state[i] & kRegularised) != 0;
   }
+  res.pixel_states = std::move(state);
   return res;
 }
 
@@ -796,6 +830,39 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
   SetDiffuseRoughness(solver, stack, options);
   PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm);
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
+  return result;
+}
+
+PhotometricStereoResult SolvePhotometricStereoAgain(const Stack& stack, const PhotometricStereoOptions& options,
+                                                    const Image& height_mm, const PhotometricStereoResult& previous,
+                                                    std::uint8_t changed_flag) {
+  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
+  CheckStack(stack, options);
+  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
+    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
+  }
+  const std::size_t n = static_cast<std::size_t>(stack.grid.width) * stack.grid.height;
+  auto on_grid = [&](const Image& image, int channels) {
+    return image.width() == stack.grid.width && image.height() == stack.grid.height && image.channels() == channels;
+  };
+  if (previous.pixel_states.size() != n || !on_grid(previous.normal, 3) || !on_grid(previous.albedo, 3) ||
+      !on_grid(previous.confidence, 1) || !on_grid(previous.condition_number, 1) || !on_grid(previous.used_lights, 1)) {
+    throw std::invalid_argument("photometric stereo: the previous solve is not of this grid");
+  }
+  Solver solver(stack, options);
+  if (solver.has_point_lights()) {
+    throw std::invalid_argument("photometric stereo: a partial solve again needs distant lights (point lights move with the height)");
+  }
+  SetDiffuseRoughness(solver, stack, options);
+  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag});
+  result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
+  std::size_t again = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    bool changed = (previous.pixel_states[i] & kSecondPass) != 0;
+    for (const Observation& o : stack.observations) changed |= !o.flags.empty() && (o.flags[i] & changed_flag) != 0;
+    again += changed;
+  }
+  LogInfo() << "photometric stereo: solved again " << (100.0 * static_cast<double>(again) / static_cast<double>(n)) << " % of the pixels";
   return result;
 }
 

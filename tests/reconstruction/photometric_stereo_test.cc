@@ -450,5 +450,73 @@ TEST(PhotometricStereo, LambertianDataKeepsLambertsLaw) {
   EXPECT_THROW(ParseDiffuseModel("oren-nayar"), std::invalid_argument);
 }
 
+// SolvePhotometricStereoAgain after cast-shadow marks: a marked pixel is what a full solve of the
+// marked stack gives, every other pixel keeps the first solve; point lights and a solve of another
+// grid are refused. To tell a kept pixel from one solved again to the same values, one light's
+// frame is also brightened after the first solve without a mark (which the contract rules out):
+// a kept pixel does not see it, a re-solved one does.
+TEST(PhotometricStereo, SolvingAgainRedoesOnlyTheMarkedPixels) {
+  // The solver is the same code on the same data: the re-solved pixels match to float round-off.
+  constexpr float kSameSolve = 1e-6f;
+  constexpr float kBrighter = 1.1f;
+  const MetricGrid grid = Grid(24, 24, kPitchMm);
+  RenderOptions render;
+  PrincipledParams<double> p;
+  p.roughness = 0.8;
+  p.specular = 0.0;
+  render.principled = p;  // a Burley lobe: the re-weighting rounds run too
+  Stack stack = RenderStack(grid, Ring(16, 30.0, 60.0, Directional), Bumps(0.1, 1.6), render);
+  const PhotometricStereoOptions options = Options(PsSolver::kRobust);
+  const Image height(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  const PhotometricStereoResult first = SolvePhotometricStereoAt(stack, options, height);
+  const std::size_t n = static_cast<std::size_t>(grid.width) * grid.height;
+  ASSERT_EQ(first.pixel_states.size(), n);
+  // Marks on a diagonal band under three lights.
+  std::vector<bool> marked(n, false);
+  for (int k : {0, 3, 9}) {
+    Observation& o = stack.observations[static_cast<std::size_t>(k)];
+    o.flags.assign(n, 0);
+    for (int r = 0; r < grid.height; ++r)
+      for (int c = 0; c < grid.width; ++c) {
+        if ((r + c) % 7 != 0) continue;
+        const std::size_t i = static_cast<std::size_t>(r) * grid.width + c;
+        o.flags[i] = kCastShadow;
+        marked[i] = true;
+      }
+  }
+  for (float& v : stack.observations[5].rgb.data()) v *= kBrighter;
+  PhotometricStereoOptions again_options = options;
+  again_options.diffuse_roughness = first.diffuse_roughness;  // as the marking keeps it
+  const PhotometricStereoResult full = SolvePhotometricStereoAt(stack, again_options, height);
+  const PhotometricStereoResult again = SolvePhotometricStereoAgain(stack, again_options, height, first, kCastShadow);
+  ExpectSane(again);
+  int redone = 0, kept = 0, kept_differs_from_full = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const PhotometricStereoResult& expected = marked[i] ? full : first;
+    bool differs = false;
+    for (int ch = 0; ch < 3; ++ch) {
+      ASSERT_NEAR(again.normal.data()[ch * n + i], expected.normal.data()[ch * n + i], kSameSolve) << "pixel " << i;
+      ASSERT_NEAR(again.albedo.data()[ch * n + i], expected.albedo.data()[ch * n + i], kSameSolve) << "pixel " << i;
+      differs |= std::fabs(full.albedo.data()[ch * n + i] - first.albedo.data()[ch * n + i]) > kSameSolve;
+    }
+    ASSERT_EQ(again.confidence.data()[i], expected.confidence.data()[i]) << "pixel " << i;
+    (marked[i] ? redone : kept) += 1;
+    kept_differs_from_full += !marked[i] && differs;
+  }
+  EXPECT_GT(redone, 0);
+  EXPECT_GT(kept, redone) << "most pixels carry no mark";
+  EXPECT_GT(kept_differs_from_full, 0) << "a pixel solved again would have seen the brighter frame";
+
+  const Image wrong_height(grid.width + 1, grid.height, 1, 0.0f, grid.pitch_mm);
+  EXPECT_THROW(SolvePhotometricStereoAgain(stack, again_options, wrong_height, first, kCastShadow), std::invalid_argument);
+  PhotometricStereoResult other_grid = first;
+  other_grid.pixel_states.pop_back();
+  EXPECT_THROW(SolvePhotometricStereoAgain(stack, again_options, height, other_grid, kCastShadow), std::invalid_argument);
+  const auto point = [](double a, double e) { return Point(a, e, 40.0, 2.0); };
+  const Stack near = RenderStack(grid, Ring(8, 30.0, 60.0, point), Bumps(0.1, 1.6));
+  EXPECT_THROW(SolvePhotometricStereoAgain(near, options, height, SolvePhotometricStereoAt(near, options, height), kCastShadow),
+               std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace u3mscan::reconstruction
