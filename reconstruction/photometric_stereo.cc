@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -134,7 +135,7 @@ struct PixelSystem {
   // rebuilds this system, and the rounds are most of photometric stereo's time.
   void Build(const std::vector<PixelObservation>& obs, bool decompose = true) {
     double a00 = 0.0, a01 = 0.0, a02 = 0.0, a11 = 0.0, a12 = 0.0, a22 = 0.0;
-    Matrix3d sum_r = Matrix3d::Zero();
+    r.setZero();
     weight_sum = 0.0;
     for (const PixelObservation& o : obs) {
       if (o.weight <= 0.0) continue;
@@ -145,11 +146,10 @@ struct PixelSystem {
       a11 += ws.y() * o.s.y();
       a12 += ws.y() * o.s.z();
       a22 += ws.z() * o.s.z();
-      sum_r.noalias() += ws * o.rgb.transpose();
+      r.noalias() += ws * o.rgb.transpose();
       weight_sum += o.weight;
     }
     a << a00, a01, a02, a01, a11, a12, a02, a12, a22;
-    r = sum_r;
     if (decompose) Decompose();
   }
 
@@ -593,10 +593,20 @@ void CheckStack(const Stack& stack, const PhotometricStereoOptions& options) {
   }
 }
 
+// The checks of SolvePhotometricStereoAt and SolvePhotometricStereoAgain: options, stack, height.
+void CheckSolveAt(const Stack& stack, const PhotometricStereoOptions& options, const Image& height_mm) {
+  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
+  CheckStack(stack, options);
+  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
+    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
+  }
+}
+
 // What SolveAt may keep of an earlier solve of the same stack (SolvePhotometricStereoAgain).
 struct EarlierSolve {
   const PhotometricStereoResult* result = nullptr;  // null: solve every pixel
   std::uint8_t changed_flag = 0;                    // observations flagged so since then
+  std::size_t* kept_pixels = nullptr;               // when not null: how many pixels kept it
 };
 
 // One full solve with every pixel at the given height (mm); with `earlier`, a pixel whose
@@ -648,14 +658,17 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
   };
 
   // Pass 1: every pixel on its own.
+  std::atomic<std::size_t> kept{0};
   ParallelFor(h, [&](std::size_t r0, std::size_t r1) {
     Scratch scratch(solver.observation_count());
     PixelSystem sys;
+    std::size_t chunk_kept = 0;
     for (std::size_t r = r0; r < r1; ++r)
       for (int c = 0; c < w; ++c) {
         const std::size_t i = r * w + c;
         if (keeps_earlier(i)) {
           keep_earlier(i);
+          ++chunk_kept;
           continue;
         }
         PixelEstimate est;
@@ -669,7 +682,9 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
         }
         store(i, est, albedo);
       }
+    kept += chunk_kept;
   });
+  if (earlier.kept_pixels) *earlier.kept_pixels = kept.load();
 
   // Pass 2: pixels that need their neighbours (dark, ill-conditioned, albedo near zero).
   std::vector<float> reliable(n);
@@ -821,11 +836,7 @@ PhotometricStereoResult RunPhotometricStereo(const Stack& stack, const Photometr
 
 PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const PhotometricStereoOptions& options,
                                                  const Image& height_mm) {
-  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
-  CheckStack(stack, options);
-  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
-    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
-  }
+  CheckSolveAt(stack, options, height_mm);
   Solver solver(stack, options);
   SetDiffuseRoughness(solver, stack, options);
   PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm);
@@ -836,11 +847,7 @@ PhotometricStereoResult SolvePhotometricStereoAt(const Stack& stack, const Photo
 PhotometricStereoResult SolvePhotometricStereoAgain(const Stack& stack, const PhotometricStereoOptions& options,
                                                     const Image& height_mm, const PhotometricStereoResult& previous,
                                                     std::uint8_t changed_flag) {
-  if (!options.Check()) throw std::invalid_argument("photometric stereo: options fail Check()");
-  CheckStack(stack, options);
-  if (height_mm.width() != stack.grid.width || height_mm.height() != stack.grid.height || height_mm.channels() != 1) {
-    throw std::invalid_argument("photometric stereo: height_mm must be 1 channel on the grid");
-  }
+  CheckSolveAt(stack, options, height_mm);
   const std::size_t n = static_cast<std::size_t>(stack.grid.width) * stack.grid.height;
   auto on_grid = [&](const Image& image, int channels) {
     return image.width() == stack.grid.width && image.height() == stack.grid.height && image.channels() == channels;
@@ -854,15 +861,11 @@ PhotometricStereoResult SolvePhotometricStereoAgain(const Stack& stack, const Ph
     throw std::invalid_argument("photometric stereo: a partial solve again needs distant lights (point lights move with the height)");
   }
   SetDiffuseRoughness(solver, stack, options);
-  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag});
+  std::size_t kept = 0;
+  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag, &kept});
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
-  std::size_t again = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    bool changed = (previous.pixel_states[i] & kSecondPass) != 0;
-    for (const Observation& o : stack.observations) changed |= !o.flags.empty() && (o.flags[i] & changed_flag) != 0;
-    again += changed;
-  }
-  LogInfo() << "photometric stereo: solved again " << (100.0 * static_cast<double>(again) / static_cast<double>(n)) << " % of the pixels";
+  LogInfo() << "photometric stereo: solved again " << (100.0 * static_cast<double>(n - kept) / static_cast<double>(n))
+            << " % of the pixels (the others carry no new mark)";
   return result;
 }
 
