@@ -114,10 +114,15 @@ struct Scratch {
 // in closed form (cofactors: no factorisation, no triangular solves); false, B untouched, when A
 // is too close to singular: det(A) <= 1e-12 trace(A)^3 (fewer than 3 independent lights).
 bool SolveNormalEquations(const Matrix3d& a, const Matrix3d& r, Matrix3d* b) {
+  // One pass of cofactors gives both the determinant and the inverse (threshold 0: the test on
+  // det is ours, below).
+  Matrix3d inverse;
+  double det = 0.0;
+  bool invertible = false;
+  a.computeInverseAndDetWithCheck(inverse, det, invertible, 0.0);
   const double scale = a.trace();
-  const double det = a.determinant();
-  if (!(det > 1e-12 * scale * scale * scale)) return false;
-  *b = a.inverse() * r;
+  if (!invertible || !(det > 1e-12 * scale * scale * scale)) return false;
+  *b = inverse * r;
   return true;
 }
 
