@@ -55,6 +55,11 @@ struct StageOptions {
   // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
   // Off only for comparisons (`process --no-plan-placement`).
   bool place_fine_pixels_on_plan = true;
+  // In bands with photometric stereo on a finer grid, when the last sweep is known before it runs
+  // (distant lights, or near ones not refined): that sweep's fine normals and albedo are kept whole
+  // (24 B a fine pixel) for the fit's fine pass, instead of every fine band being solved once more
+  // (pipeline/tiled_side.cc). The same maps either way; off only for tests.
+  bool keep_last_fine_solve = true;
 };
 
 StageOptions OptionsForPreset(Preset preset);

@@ -217,14 +217,23 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   Stack fine_sample;
   fitting::SurfaceGeometry fine_sample_geometry;  // its normals and albedo (the heights once integrated)
   bool fine_sample_gathered = false;
+  // The last sweep's fine normals and albedo, kept whole for the fit's fine pass (24 B a fine pixel)
+  // so that it does not solve every fine band once more: on the 36 MP plain a sweep of photometric
+  // stereo on the fine bands is about 200 s. Kept when the last sweep is known before it runs
+  // (distant lights, or near ones not refined); near-light rounds, which may end on a rejected
+  // round, leave them empty and the fit solves the fine bands again at the kept round's heights.
+  bool keep_last_fine_solve = false;  // set below, once the sample tells the lights
+  Image fine_fit_normal, fine_fit_albedo;
   Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
-                         bool keep_fine = false, const Image* fine_heights = nullptr, bool gather_fine_sample = false) {
+                         bool keep_fine = false, const Image* fine_heights = nullptr, bool gather_fine_sample = false,
+                         bool last_sweep = false) {
     if (gather_fine_sample && fine_factor > 1) {
       fine_sample = Stack();
       fine_sample_geometry = fitting::SurfaceGeometry();
       fine_sample_gathered = true;
     }
+    const bool keep_for_fit = last_sweep && keep_last_fine_solve && fine_factor > 1;
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
     Bands& solved = fine_factor > 1 ? fine_bands : bands;
@@ -249,6 +258,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fine_last_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_last_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
     }
+    if (keep_for_fit) {
+      fine_fit_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
+      fine_fit_albedo = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
+    }
     for (int b = 0; b < solved.count(); ++b) {
       Stack band = solved.Build(frames, b);
       if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
@@ -271,6 +284,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       if (keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
+      }
+      if (keep_for_fit) {
+        PasteRows(band_ps.normal, solved.Row0(b), &fine_fit_normal);
+        PasteRows(band_ps.albedo, solved.Row0(b), &fine_fit_albedo);
       }
       if (fine_factor > 1) {
         // Not placed on the plan (one band's is): a placed square reaches the next band's rows,
@@ -327,7 +344,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // else the marked one (distant lights, near ones not refined); rounds gather nothing.
   const bool rounds_follow = HasPointLights(out.sample) && ps_options.refine_height;
   const bool marks_follow = options.mark_cast_shadows && !rounds_follow;
-  const bool first_sweep_gathers = clusters_on_fine_grid && !rounds_follow && !marks_follow;
+  const bool first_sweep_is_last = !rounds_follow && !marks_follow;
+  const bool first_sweep_gathers = clusters_on_fine_grid && first_sweep_is_last;
+  keep_last_fine_solve = fine_fit && !rounds_follow && options.keep_last_fine_solve;
   if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
@@ -339,10 +358,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ps_options.diffuse_roughness = roughness;
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers,
+                     first_sweep_is_last);
   } else if (fine_factor > 1) {
     // On the fine bands, the sample taken above.
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers,
+                     first_sweep_is_last);
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
@@ -366,7 +387,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     shadow_seconds += StageClock() - start;
     ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)", false, nullptr,
-                     clusters_on_fine_grid);
+                     clusters_on_fine_grid, /*last_sweep=*/true);
   }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
@@ -518,8 +539,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   ReportObliqueView(out.sample, report);
   double start = StageClock();
   const double build_before_fit = bands.build_seconds() + fine_bands.build_seconds();
-  // --ps-supersample: a fine band solved again as the last sweep solved it (kept whole, its normals
-  // and albedo would cost 24 B a fine pixel), its heights from the whole fine grid's: the surface's
+  // --ps-supersample: a fine band with the last sweep's normals and albedo (kept above, else solved
+  // again as the last sweep solved it), its heights from the whole fine grid's: the surface's
   // (bilinear), the last solve's for the near lights' vectors (empty: the anchor plane) and the
   // marks'. 4 B a fine pixel each, made when a fine pass below needs them.
   const MetricGrid& fine_grid = fine_calibration.grid;
@@ -541,15 +562,18 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       }
     }
   }
-  auto solve_fine_band = [&](int b, Stack* band) {
+  // Its normals and albedo (the surface's heights are the caller's to add).
+  auto fine_band_surface = [&](int b, Stack* band) -> fitting::SurfaceGeometry {
     *band = fine_bands.Build(frames, b);
     if (!fine_marks.empty()) mark(fine_marks, fine_grid, band);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
-    return reconstruction::SolvePhotometricStereoAt(
+    if (!fine_fit_normal.empty()) return {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image()};
+    PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
         *band, ps_options,
         fine_solve_height.empty()
             ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
             : CropRows(fine_solve_height, row0, rows));
+    return {std::move(solved.normal), std::move(solved.albedo), Image()};
   };
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
@@ -559,11 +583,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (!fine_sample_gathered) {
       for (int b = 0; b < fine_bands.count(); ++b) {
         Stack band;
-        const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
+        const fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band);
         const int row0 = fine_bands.Row0(b);
         AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
-        SampleRows(band_ps.normal, row0, fine_step, fine_sample_grid, &fine_sample_geometry.normals);
-        SampleRows(band_ps.albedo, row0, fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
+        SampleRows(band_surface.normals, row0, fine_step, fine_sample_grid, &fine_sample_geometry.normals);
+        SampleRows(band_surface.albedo, row0, fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
         ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
       }
     }
@@ -592,6 +616,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   Image fine_height;
   double fine_fit_seconds = 0.0;
   std::string placed;  // what the plan placement moved, for the report
+  const bool fine_solves_kept = !fine_fit_normal.empty();
   if (fine_fit && !out.fit.normals.empty()) {
     const double fine_start = StageClock();
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
@@ -613,11 +638,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     placed = PlacementDetail(placement, fine_grid.pitch_mm);
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
-      const PhotometricStereoResult band_ps = solve_fine_band(b, &band);
+      fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band);
       const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
+      band_surface.height_mm = CropRows(fine_surface_height, row0, rows);
       fitting::FitResult band_fit = fitting::StartPixelMaps(model, band.grid);
-      fitting::FitPixelRows(model, band, {band_ps.normal, band_ps.albedo, CropRows(fine_surface_height, row0, rows)}, 0,
-                            &band_fit, &fine_tally);
+      fitting::FitPixelRows(model, band, band_surface, 0, &band_fit, &fine_tally);
       PasteRows(band_fit.normals, row0, &fine_normals);
       const Image band_weights = SurfaceAreaWeights(band_fit.normals, parallax, row0);
       if (!band_weights.empty()) PasteRows(band_weights, row0, &fine_weights);
@@ -627,6 +652,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
+    fine_fit_normal = fine_fit_albedo = Image();  // before the fine integration's work space
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
                                               fine_factor, grid.pitch_mm, near, options, progress, placement,
                                               &out.fit.normals);
@@ -651,9 +677,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
                        " s included)";
   if (fine_fit_seconds > 0.0) {
-    char fine_detail[96];
-    std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it)", fine_factor,
-                  fine_fit_seconds);
+    char fine_detail[160];
+    std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it; %s)", fine_factor,
+                  fine_fit_seconds,
+                  fine_solves_kept ? "the last sweep's fine solves kept" : "each fine band solved again as the last sweep did");
     detail += fine_detail + placed;
   }
   ReportFitStep(out.fit, std::move(detail), StageClock() - start, report);

@@ -9,9 +9,12 @@
 #include <string>
 
 #include "bench/evaluate.h"
+#include "capture/stack_builder.h"
 #include "datasets_synthetic/synth_run.h"
 #include "pipeline/process.h"
 #include "pipeline/supersampled_reconstruction.h"
+#include "pipeline/tiled_side.h"
+#include "pipeline/tiles.h"
 #include "tests/support/temp_dir.h"
 
 namespace u3mscan {
@@ -153,6 +156,53 @@ TEST(SupersampledReconstruction, BandsOfANearRigRefineTheirHeightsOnTheFinerGrid
   ASSERT_NE(solve, nullptr);
   EXPECT_NE(solve->reason.find("near point lights, height refined"), std::string::npos) << solve->reason;
   EXPECT_EQ(solve->reason.find("refined 0 rounds"), std::string::npos) << solve->reason;
+}
+
+// In bands with distant lights the fit's fine pass takes the last sweep's fine normals and albedo,
+// kept whole (StageOptions::keep_last_fine_solve), instead of solving every fine band once more:
+// the maps must be bit for bit those of the run that solves them again, and the report says which.
+TEST(SupersampledReconstruction, TheFitTakesTheLastSweepsFineSolvesAsSolvingThemAgainWould) {
+  test::TempDir dir;
+  const auto synth = PlainAtTwiceTheMapsDpi(dir);
+  StageOptions stages = OptionsForPreset(Preset::kFast);
+  stages.calibration.dpi = kMapDpi;
+  RunReport prepare_report;
+  const PreparedCapture prepared = PrepareCapture(synth / synthetic::kCaptureSubdir, stages, &prepare_report);
+  const MetricGrid& grid = prepared.calibration.grid;
+  const int observations = static_cast<int>(SideSampleFrames(prepared.capture.manifest(), "front").size());
+  constexpr int kFactor = 2;
+  const TilePlan whole = PlanTiles(grid, observations, /*flats=*/false, 1e12, kFactor);
+  const TilePlan plan = PlanTiles(grid, observations, /*flats=*/false, whole.whole_stack_bytes / 2.5, kFactor);
+  ASSERT_GT(plan.bands, 1);
+  ASSERT_EQ(plan.fine_factor, kFactor);
+  auto run = [&](bool keep, RunReport* report) {
+    StageOptions options = stages;
+    options.keep_last_fine_solve = keep;
+    return ProcessSideTiled(prepared, "front", options, plan, Image(), /*residual_observations=*/4, {}, report);
+  };
+  RunReport kept_report, again_report;
+  const TiledSide kept = run(true, &kept_report), again = run(false, &again_report);
+  auto fit_reason = [](const RunReport& report) {
+    const StepRecord* fit = FindStep(report, "fit");
+    return fit ? fit->reason : std::string();
+  };
+  EXPECT_NE(fit_reason(kept_report).find("the last sweep's fine solves kept"), std::string::npos) << fit_reason(kept_report);
+  EXPECT_NE(fit_reason(again_report).find("solved again"), std::string::npos) << fit_reason(again_report);
+  auto expect_same = [](const Image& a, const Image& b, const char* what) {
+    ASSERT_FALSE(a.empty()) << what;
+    ASSERT_EQ(a.data().size(), b.data().size()) << what;
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.data().size(); ++i) differ += a.data()[i] != b.data()[i];
+    EXPECT_EQ(differ, 0u) << what;
+  };
+  expect_same(kept.reconstruction.photometric_stereo.normal, again.reconstruction.photometric_stereo.normal, "normals");
+  expect_same(kept.reconstruction.height_mm, again.reconstruction.height_mm, "heights");
+  expect_same(kept.fit.base_color, again.fit.base_color, "base colour");
+  ASSERT_EQ(kept.fit.clusters.size(), again.fit.clusters.size());
+  for (std::size_t p = 0; p < kept.fit.parameter_maps.size(); ++p) {
+    ASSERT_EQ(kept.fit.parameter_maps[p].empty(), again.fit.parameter_maps[p].empty()) << p;
+    if (!kept.fit.parameter_maps[p].empty()) expect_same(kept.fit.parameter_maps[p], again.fit.parameter_maps[p], "a parameter map");
+  }
 }
 
 TEST(SupersampledReconstruction, ThePhotometricStereoAverageIsPlacedOnThePlanUnlessTurnedOff) {
