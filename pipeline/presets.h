@@ -55,11 +55,13 @@ struct StageOptions {
   // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
   // Off only for comparisons (`process --no-plan-placement`).
   bool place_fine_pixels_on_plan = true;
-  // In bands with photometric stereo on a finer grid, when the last sweep is known before it runs
-  // (distant lights, or near ones not refined): that sweep's fine normals and albedo are kept whole
-  // (24 B a fine pixel) for the fit's fine pass, instead of every fine band being solved once more
-  // (pipeline/tiled_side.cc). The same maps either way; off only for tests.
-  bool keep_last_fine_solve = true;
+  // In bands (pipeline/tiled_side.cc), sweeps reuse the solves of earlier sweeps instead of
+  // repeating them: with distant lights the marked sweep solves again only the pixels a mark
+  // changes (SolvePhotometricStereoAgain, from the first sweep's whole solve: 37 B a fine pixel
+  // with a finer grid), and with a finer grid the fit's fine pass takes the last sweep's fine
+  // normals and albedo (24 B a fine pixel) when that sweep is known before it runs. The same maps
+  // either way; off only for tests.
+  bool reuse_band_solves = true;
 };
 
 StageOptions OptionsForPreset(Preset preset);

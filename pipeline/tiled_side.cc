@@ -108,6 +108,7 @@ PhotometricStereoResult EmptyPs(const MetricGrid& grid) {
   ps.confidence = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
   ps.condition_number = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
   ps.used_lights = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+  ps.pixel_states.assign(static_cast<std::size_t>(grid.width) * grid.height, 0);
   return ps;
 }
 
@@ -117,11 +118,38 @@ void PasteBand(const PhotometricStereoResult& band, int row0, PhotometricStereoR
   PasteRows(band.confidence, row0, &full->confidence);
   PasteRows(band.condition_number, row0, &full->condition_number);
   PasteRows(band.used_lights, row0, &full->used_lights);
+  // A solve's own states (not an average onto the maps, which has none): what solving it again needs.
+  if (!band.pixel_states.empty()) {
+    std::copy(band.pixel_states.begin(), band.pixel_states.end(),
+              full->pixel_states.begin() + static_cast<std::ptrdiff_t>(row0) * full->normal.width());
+  }
   full->ill_conditioned_pixels += band.ill_conditioned_pixels;
   full->dark_pixels += band.dark_pixels;
   full->low_albedo_pixels += band.low_albedo_pixels;
   full->clamped_normal_pixels += band.clamped_normal_pixels;
   full->regularised_pixels += band.regularised_pixels;
+}
+
+// Rows [row0, row0 + rows) of a whole solve: its maps and pixel states (the counts are not split).
+PhotometricStereoResult CropPs(const PhotometricStereoResult& whole, int row0, int rows) {
+  PhotometricStereoResult band;
+  band.normal = CropRows(whole.normal, row0, rows);
+  band.albedo = CropRows(whole.albedo, row0, rows);
+  band.confidence = CropRows(whole.confidence, row0, rows);
+  band.condition_number = CropRows(whole.condition_number, row0, rows);
+  band.used_lights = CropRows(whole.used_lights, row0, rows);
+  const auto first = whole.pixel_states.begin() + static_cast<std::ptrdiff_t>(row0) * whole.normal.width();
+  band.pixel_states.assign(first, first + static_cast<std::ptrdiff_t>(rows) * whole.normal.width());
+  return band;
+}
+
+// The report's words for the share of pixels the marked sweep solved again (< 0: every one was).
+std::string SolvedAgainDetail(double share) {
+  if (share < 0.0) return "";
+  char detail[120];
+  std::snprintf(detail, sizeof detail, "; after the cast-shadow marks %.1f %% of the pixels solved again (the others carry no new mark)",
+                100.0 * share);
+  return detail;
 }
 
 // Mean angle between two normal maps, degrees (as RunPhotometricStereo's refinement measures it).
@@ -191,11 +219,18 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // integrated on the whole fine grid (as one band marks its fine stack: RunPhotometricStereoMarkingShadows
   // there), not from the maps' heights taken there bilinearly, which are too smooth to place the
   // shadows of a yarn's wall (plain at 3x in 3 bands: normals 1.27 -> 1.13 deg, base colour dE
-  // 0.92 -> 0.49; one band 1.14 and 0.50; docs/process.md). The first sweep keeps the fine unit normals and confidence
-  // for it (16 B a fine pixel, released once integrated). Near lights refined on the finer grid do
-  // the same every round (below, "Near point lights").
+  // 0.92 -> 0.49; one band 1.14 and 0.50; docs/process.md). The first sweep keeps the fine unit
+  // normals and confidence for it: in fine_first (below) with distant lights, else in
+  // fine_last_normal and fine_last_confidence (16 B a fine pixel, released once integrated). Near
+  // lights refined on the finer grid keep the latter every round (below, "Near point lights").
   Image fine_shadow_height;
   Image fine_last_normal, fine_last_confidence;
+  // With distant lights, the first sweep's whole fine solve (37 B a fine pixel: maps and pixel
+  // states), from which the marked sweep solves again only the pixels a mark changes
+  // (SolvePhotometricStereoAgain, as one band does); that sweep updates it in place, and the fit
+  // takes its normals and albedo. Without a fine factor the first sweep's full maps serve.
+  PhotometricStereoResult fine_first;
+  double solved_again_share = -1.0;  // of the solve grid's pixels, in the sweep that solved again (-1: none did)
 
   // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
   // cast shadows marked from the whole-map heights `marks_from` (nullptr: none). With a fine factor
@@ -204,8 +239,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // result averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be
   // null (the sample is on the maps' grid: a sweep of its own gathers it). `fine_heights` (on the
   // fine grid; nullptr: none) replaces `height` there, and `marks_from` too when that is `height`.
-  // `keep_fine`: the fine bands' normals and confidence are also pasted into fine_last_normal and
-  // fine_last_confidence.
+  // `role` says what the sweep keeps or reuses besides its maps (SweepRole).
   // The fit's clusters on a sample of the finer grid (below, before the fit): one fine pixel in each
   // block of step x step map pixels, with its fine normal and albedo, taken from the marked, solved
   // fine bands. The sweep whose fine solves the fit would repeat gathers it (`gather_fine_sample`),
@@ -225,9 +259,19 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   bool keep_last_fine_solve = false;  // set below, once the sample tells the lights
   Image fine_fit_normal, fine_fit_albedo;
   Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
+  // What one sweep keeps or reuses besides its maps.
+  struct SweepRole {
+    bool keep_fine = false;                // the fine bands' normals and confidence into fine_last_*
+    const Image* fine_heights = nullptr;   // see above
+    bool gather_fine_sample = false;       // the fit's sample of the finer grid, from this sweep's solves
+    bool last_sweep = false;               // the fit's fine pass takes this sweep's fine solves (keep_last_fine_solve)
+    bool keep_whole = false;               // the whole solve kept to be solved again (fine_first, or the maps)
+    const PhotometricStereoResult* earlier = nullptr;  // solve again from it: only pixels with a new mark
+  };
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
-                         bool keep_fine = false, const Image* fine_heights = nullptr, bool gather_fine_sample = false,
-                         bool last_sweep = false) {
+                         const SweepRole& role = {}) {
+    const bool keep_fine = role.keep_fine, gather_fine_sample = role.gather_fine_sample, last_sweep = role.last_sweep;
+    const Image* fine_heights = role.fine_heights;
     if (gather_fine_sample && fine_factor > 1) {
       fine_sample = Stack();
       fine_sample_geometry = fitting::SurfaceGeometry();
@@ -258,10 +302,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fine_last_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_last_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
     }
-    if (keep_for_fit) {
+    // Solving again from fine_first updates it in place (a band's rows are cropped before its solve);
+    // the fit then takes its normals and albedo.
+    const bool again_in_place = fine_factor > 1 && role.earlier == &fine_first;
+    if (keep_for_fit && !again_in_place) {
       fine_fit_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_fit_albedo = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
     }
+    if (role.keep_whole && fine_factor > 1) fine_first = EmptyPs(solve_grid);
+    long long kept_pixels = 0;
     for (int b = 0; b < solved.count(); ++b) {
       Stack band = solved.Build(frames, b);
       if (sample) AddToSample(band, bands.Row0(b), step, sample_grid, sample);
@@ -275,7 +324,13 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
           solve_height ? CropRows(*solve_height, solved.Row0(b), solved.Rows(b))
                        : Image(solve_grid.width, solved.Rows(b), 1, static_cast<float>(ps_options.integration.mean_height_mm),
                                solve_grid.pitch_mm);
-      PhotometricStereoResult band_ps = reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
+      PhotometricStereoResult band_ps =
+          role.earlier ? reconstruction::SolvePhotometricStereoAgain(band, ps_options, band_height,
+                                                                     CropPs(*role.earlier, solved.Row0(b), solved.Rows(b)),
+                                                                     kCastShadow)
+                       : reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
+      kept_pixels += band_ps.kept_pixels;
+      if ((role.keep_whole || again_in_place) && fine_factor > 1) PasteBand(band_ps, solved.Row0(b), &fine_first);
       if (gather_fine_sample && fine_factor > 1) {
         AddToSample(band, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
@@ -285,7 +340,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
       }
-      if (keep_for_fit) {
+      if (keep_for_fit && !again_in_place) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_fit_normal);
         PasteRows(band_ps.albedo, solved.Row0(b), &fine_fit_albedo);
       }
@@ -298,6 +353,16 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       PasteBand(band_ps, bands.Row0(b), &full);
       solve_seconds += StageClock() - start;
       ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
+    }
+    if (role.earlier) {
+      solved_again_share = 1.0 - static_cast<double>(kept_pixels) / (static_cast<double>(solve_grid.width) * solve_grid.height);
+    }
+    if (again_in_place) {
+      if (keep_for_fit) {
+        fine_fit_normal = std::move(fine_first.normal);
+        fine_fit_albedo = std::move(fine_first.albedo);
+      }
+      fine_first = PhotometricStereoResult();
     }
     return full;
   };
@@ -335,7 +400,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // for the fine heights (fine_shadow_height above). Near lights refined on fine bands: every
   // sweep's, for the next round's heights. The sample, and so the lights, are known.
   const bool fine_near_rounds = fine_factor > 1 && HasPointLights(out.sample) && ps_options.refine_height;
-  const bool keep_fine_normals = fine_factor > 1 && (fine_near_rounds || options.mark_cast_shadows);
+  // Distant lights marked after the first sweep: the marked sweep solves again only the pixels a
+  // mark changes, from the first sweep's whole solve (SolvePhotometricStereoAgain, as one band).
+  const bool solve_again_after_marks =
+      options.mark_cast_shadows && !HasPointLights(out.sample) && options.reuse_band_solves;
+  const bool keep_fine_normals =
+      fine_factor > 1 && (fine_near_rounds || (options.mark_cast_shadows && !solve_again_after_marks));
   // The clusters on the finer grid (StageOptions::fit_clusters_on_fine_grid), as one band fits them
   // on its whole fine stack (supersampled_reconstruction.h). Not for a tilted view: its fine solves
   // read the top view on the face's plane, and one band fits that case on the maps' grid too.
@@ -346,7 +416,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   const bool marks_follow = options.mark_cast_shadows && !rounds_follow;
   const bool first_sweep_is_last = !rounds_follow && !marks_follow;
   const bool first_sweep_gathers = clusters_on_fine_grid && first_sweep_is_last;
-  keep_last_fine_solve = fine_fit && !rounds_follow && options.keep_last_fine_solve;
+  keep_last_fine_solve = fine_fit && !rounds_follow && options.reuse_band_solves;
   if (choose_roughness) {
     const double start = StageClock();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
@@ -358,12 +428,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ps_options.diffuse_roughness = roughness;
       LogInfo() << "photometric stereo: Burley diffuse lobe, roughness " << roughness << " (least residual on the sample)";
     }
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers,
-                     first_sweep_is_last);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo",
+                     {.keep_fine = keep_fine_normals, .gather_fine_sample = first_sweep_gathers,
+                      .last_sweep = first_sweep_is_last, .keep_whole = solve_again_after_marks});
   } else if (fine_factor > 1) {
     // On the fine bands, the sample taken above.
-    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo", keep_fine_normals, nullptr, first_sweep_gathers,
-                     first_sweep_is_last);
+    ps = solve_sweep(nullptr, nullptr, nullptr, "photometric stereo",
+                     {.keep_fine = keep_fine_normals, .gather_fine_sample = first_sweep_gathers,
+                      .last_sweep = first_sweep_is_last, .keep_whole = solve_again_after_marks});
   } else {
     // Sweep 1: the anchor plane, and the sample; the side's checks on the sample.
     ps = solve_sweep(nullptr, nullptr, &out.sample, "photometric stereo");
@@ -384,10 +456,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
           reconstruction::IntegrateNormals(fine_last_normal, fine_last_confidence, integration).height_mm;
       fine_last_normal = Image();
       fine_last_confidence = Image();
+    } else if (!fine_first.normal.empty()) {
+      integration.pitch_mm = fine_calibration.grid.pitch_mm;
+      fine_shadow_height = reconstruction::IntegrateNormals(fine_first.normal, fine_first.confidence, integration).height_mm;
     }
     shadow_seconds += StageClock() - start;
-    ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)", false, nullptr,
-                     clusters_on_fine_grid, /*last_sweep=*/true);
+    const PhotometricStereoResult* earlier = solve_again_after_marks ? (fine_factor > 1 ? &fine_first : &ps) : nullptr;
+    ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)",
+                     {.gather_fine_sample = clusters_on_fine_grid, .last_sweep = true, .earlier = earlier});
   }
 
   // Near point lights: RunPhotometricStereo's refinement, one sweep per round.
@@ -431,8 +507,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                 reconstruction::IntegrateNormals(fine_last_normal, fine_last_confidence, fine_integration).height_mm;
           }
           return solve_sweep(&height, options.mark_cast_shadows ? &height : nullptr, nullptr,
-                             "photometric stereo (near-light round)", fine_near_rounds,
-                             fine_near_rounds ? &fine_round_height : nullptr);
+                             "photometric stereo (near-light round)",
+                             {.keep_fine = fine_near_rounds, .fine_heights = fine_near_rounds ? &fine_round_height : nullptr});
         },
         [&](const Image&, bool kept_round) {
           if (!kept_round) return;
@@ -473,7 +549,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                                        (near_rounds_capped ? ", at most " + std::to_string(near_round_limit) + " in bands)" : ")")
                                  : std::string("distant lights")) +
                                (fine_factor > 1 ? "; each band solved on the finer grid, its unit normals averaged onto the maps' grid"
-                                      : ""),
+                                      : "") +
+                               SolvedAgainDetail(solved_again_share),
                            solve_seconds});
   if (!near) {
     report->steps.push_back({"near-light refinement", false,

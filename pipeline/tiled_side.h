@@ -8,6 +8,10 @@
 //              the side's checks (frames without signal, usable pixels) run on it
 //   sweeps 2.. near point lights: the whole normal map is integrated once per round and every band
 //              solved again at the new heights (RunPhotometricStereo's refinement, round by round)
+//   marks      distant lights: cast shadows marked from the integrated heights, and one sweep solves
+//              again only the pixels a mark changes (SolvePhotometricStereoAgain, from sweep 1's
+//              solve kept whole, as one band does); with a finer grid the fit then takes its fine
+//              normals and albedo instead of solving the fine bands once more
 //   integration of the whole normal map (as ReconstructSide)
 //   relief     a tilted view only (relief_registration.h): the bands from here on are built at the
 //              heights (top on the face) and their hidden pixels marked; one sweep solves

@@ -869,6 +869,7 @@ PhotometricStereoResult SolvePhotometricStereoAgain(const Stack& stack, const Ph
   std::size_t kept = 0;
   PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag, &kept});
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
+  result.kept_pixels = static_cast<long long>(kept);
   LogInfo() << "photometric stereo: solved again " << (100.0 * static_cast<double>(n - kept) / static_cast<double>(n))
             << " % of the pixels (the others carry no new mark)";
   return result;

@@ -128,6 +128,7 @@ struct PhotometricStereoResult {
   long long low_albedo_pixels = 0;       // albedo below reliable_albedo
   long long clamped_normal_pixels = 0;   // n_z clamped to min_normal_z
   long long regularised_pixels = 0;      // normal pulled toward the neighbours
+  long long kept_pixels = 0;             // estimate kept from an earlier solve (SolvePhotometricStereoAgain)
   int near_iterations = 0;               // height refinement rounds run (0 for distant lights)
   double diffuse_roughness = -1.0;       // the Burley roughness used (given or estimated); -1: Lambert's law
   double last_normal_change_deg = 0.0;   // mean normal change of the last refinement round

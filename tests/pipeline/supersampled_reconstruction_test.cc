@@ -158,36 +158,43 @@ TEST(SupersampledReconstruction, BandsOfANearRigRefineTheirHeightsOnTheFinerGrid
   EXPECT_EQ(solve->reason.find("refined 0 rounds"), std::string::npos) << solve->reason;
 }
 
-// In bands with distant lights the fit's fine pass takes the last sweep's fine normals and albedo,
-// kept whole (StageOptions::keep_last_fine_solve), instead of solving every fine band once more:
-// the maps must be bit for bit those of the run that solves them again, and the report says which.
-TEST(SupersampledReconstruction, TheFitTakesTheLastSweepsFineSolvesAsSolvingThemAgainWould) {
-  test::TempDir dir;
-  const auto synth = PlainAtTwiceTheMapsDpi(dir);
+// In bands with distant lights, sweeps reuse earlier sweeps' solves (StageOptions::reuse_band_solves):
+// the marked sweep solves again only the pixels a mark changes, and with a finer grid the fit's fine
+// pass takes the last sweep's fine normals and albedo instead of solving every fine band once more.
+// The maps must be bit for bit those of the run that solves everything again, and the report says
+// what was reused. Run on the maps' grid (factor 1) and on the 2x finer grid.
+void ExpectReusedBandSolvesGiveTheSameMaps(const test::TempDir& dir, const std::filesystem::path& synth, int factor) {
   StageOptions stages = OptionsForPreset(Preset::kFast);
   stages.calibration.dpi = kMapDpi;
   RunReport prepare_report;
   const PreparedCapture prepared = PrepareCapture(synth / synthetic::kCaptureSubdir, stages, &prepare_report);
   const MetricGrid& grid = prepared.calibration.grid;
   const int observations = static_cast<int>(SideSampleFrames(prepared.capture.manifest(), "front").size());
-  constexpr int kFactor = 2;
-  const TilePlan whole = PlanTiles(grid, observations, /*flats=*/false, 1e12, kFactor);
-  const TilePlan plan = PlanTiles(grid, observations, /*flats=*/false, whole.whole_stack_bytes / 2.5, kFactor);
+  const TilePlan whole = PlanTiles(grid, observations, /*flats=*/false, 1e12, factor);
+  const TilePlan plan = PlanTiles(grid, observations, /*flats=*/false, whole.whole_stack_bytes / 2.5, factor);
   ASSERT_GT(plan.bands, 1);
-  ASSERT_EQ(plan.fine_factor, kFactor);
-  auto run = [&](bool keep, RunReport* report) {
+  ASSERT_EQ(plan.fine_factor, factor);
+  auto run = [&](bool reuse, RunReport* report) {
     StageOptions options = stages;
-    options.keep_last_fine_solve = keep;
+    options.reuse_band_solves = reuse;
     return ProcessSideTiled(prepared, "front", options, plan, Image(), /*residual_observations=*/4, {}, report);
   };
-  RunReport kept_report, again_report;
-  const TiledSide kept = run(true, &kept_report), again = run(false, &again_report);
-  auto fit_reason = [](const RunReport& report) {
-    const StepRecord* fit = FindStep(report, "fit");
-    return fit ? fit->reason : std::string();
+  RunReport reused_report, again_report;
+  const TiledSide reused = run(true, &reused_report), again = run(false, &again_report);
+  auto reason = [](const RunReport& report, const std::string& step) {
+    for (const StepRecord& s : report.steps) {
+      if (s.name.rfind(step, 0) == 0) return s.reason;
+    }
+    return std::string();
   };
-  EXPECT_NE(fit_reason(kept_report).find("the last sweep's fine solves kept"), std::string::npos) << fit_reason(kept_report);
-  EXPECT_NE(fit_reason(again_report).find("solved again"), std::string::npos) << fit_reason(again_report);
+  const std::string solved_again = "after the cast-shadow marks";
+  EXPECT_NE(reason(reused_report, "photometric stereo").find(solved_again), std::string::npos)
+      << reason(reused_report, "photometric stereo");
+  EXPECT_EQ(reason(again_report, "photometric stereo").find(solved_again), std::string::npos);
+  if (factor > 1) {
+    EXPECT_NE(reason(reused_report, "fit").find("the last sweep's fine solves kept"), std::string::npos) << reason(reused_report, "fit");
+    EXPECT_NE(reason(again_report, "fit").find("solved again"), std::string::npos) << reason(again_report, "fit");
+  }
   auto expect_same = [](const Image& a, const Image& b, const char* what) {
     ASSERT_FALSE(a.empty()) << what;
     ASSERT_EQ(a.data().size(), b.data().size()) << what;
@@ -195,13 +202,27 @@ TEST(SupersampledReconstruction, TheFitTakesTheLastSweepsFineSolvesAsSolvingThem
     for (std::size_t i = 0; i < a.data().size(); ++i) differ += a.data()[i] != b.data()[i];
     EXPECT_EQ(differ, 0u) << what;
   };
-  expect_same(kept.reconstruction.photometric_stereo.normal, again.reconstruction.photometric_stereo.normal, "normals");
-  expect_same(kept.reconstruction.height_mm, again.reconstruction.height_mm, "heights");
-  expect_same(kept.fit.base_color, again.fit.base_color, "base colour");
-  ASSERT_EQ(kept.fit.clusters.size(), again.fit.clusters.size());
-  for (std::size_t p = 0; p < kept.fit.parameter_maps.size(); ++p) {
-    ASSERT_EQ(kept.fit.parameter_maps[p].empty(), again.fit.parameter_maps[p].empty()) << p;
-    if (!kept.fit.parameter_maps[p].empty()) expect_same(kept.fit.parameter_maps[p], again.fit.parameter_maps[p], "a parameter map");
+  expect_same(reused.reconstruction.photometric_stereo.normal, again.reconstruction.photometric_stereo.normal, "normals");
+  expect_same(reused.reconstruction.photometric_stereo.albedo, again.reconstruction.photometric_stereo.albedo, "albedo");
+  expect_same(reused.reconstruction.height_mm, again.reconstruction.height_mm, "heights");
+  expect_same(reused.fit.base_color, again.fit.base_color, "base colour");
+  ASSERT_EQ(reused.fit.clusters.size(), again.fit.clusters.size());
+  for (std::size_t p = 0; p < reused.fit.parameter_maps.size(); ++p) {
+    ASSERT_EQ(reused.fit.parameter_maps[p].empty(), again.fit.parameter_maps[p].empty()) << p;
+    if (!reused.fit.parameter_maps[p].empty()) expect_same(reused.fit.parameter_maps[p], again.fit.parameter_maps[p], "a parameter map");
+  }
+}
+
+TEST(SupersampledReconstruction, BandsReuseTheirEarlierSolvesAndGiveTheSameMaps) {
+  test::TempDir dir;
+  const auto synth = PlainAtTwiceTheMapsDpi(dir);
+  {
+    SCOPED_TRACE("2x finer grid");
+    ExpectReusedBandSolvesGiveTheSameMaps(dir, synth, 2);
+  }
+  {
+    SCOPED_TRACE("maps' grid");
+    ExpectReusedBandSolvesGiveTheSameMaps(dir, synth, 1);
   }
 }
 
