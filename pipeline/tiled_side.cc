@@ -237,12 +237,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // the bands are the fine grid's, the heights taken there bilinearly (the marks from
   // fine_shadow_height instead when it is set and `marks_from` is shadow_height), and each band's
   // result averaged onto the maps' rows (AveragePhotometricStereoOntoMaps); `sample` must then be
-  // null (the sample is on the maps' grid: a sweep of its own gathers it). `fine_heights` (on the
+  // null (the sample is on the maps' grid: a sweep of its own gathers it). `role.fine_heights` (on the
   // fine grid; nullptr: none) replaces `height` there, and `marks_from` too when that is `height`.
   // `role` says what the sweep keeps or reuses besides its maps (SweepRole).
   // The fit's clusters on a sample of the finer grid (below, before the fit): one fine pixel in each
   // block of step x step map pixels, with its fine normal and albedo, taken from the marked, solved
-  // fine bands. The sweep whose fine solves the fit would repeat gathers it (`gather_fine_sample`),
+  // fine bands. The sweep whose fine solves the fit would repeat gathers it (`role.gather_fine_sample`),
   // so that no sweep runs for it alone (distant lights; near lights refined in rounds do not know
   // their last sweep in advance, and the fit gathers theirs in a sweep of its own).
   const bool fine_fit = fine_factor > 1 && options.fit.refine_pixel_normals;
@@ -262,7 +262,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // What one sweep keeps or reuses besides its maps.
   struct SweepRole {
     bool keep_fine = false;                // the fine bands' normals and confidence into fine_last_*
-    const Image* fine_heights = nullptr;   // see above
+    const Image* fine_heights = nullptr;   // the solve's heights on the fine grid (see above)
     bool gather_fine_sample = false;       // the fit's sample of the finer grid, from this sweep's solves
     bool last_sweep = false;               // the fit's fine pass takes this sweep's fine solves (keep_last_fine_solve)
     bool keep_whole = false;               // the whole solve kept to be solved again (fine_first, or the maps)
@@ -270,25 +270,23 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   };
   auto solve_sweep = [&](const Image* height, const Image* marks_from, Stack* sample, const char* stage,
                          const SweepRole& role = {}) {
-    const bool keep_fine = role.keep_fine, gather_fine_sample = role.gather_fine_sample, last_sweep = role.last_sweep;
-    const Image* fine_heights = role.fine_heights;
-    if (gather_fine_sample && fine_factor > 1) {
+    if (role.gather_fine_sample && fine_factor > 1) {
       fine_sample = Stack();
       fine_sample_geometry = fitting::SurfaceGeometry();
       fine_sample_gathered = true;
     }
-    const bool keep_for_fit = last_sweep && keep_last_fine_solve && fine_factor > 1;
+    const bool keep_for_fit = role.last_sweep && keep_last_fine_solve && fine_factor > 1;
     PhotometricStereoResult full = EmptyPs(grid);
     shadow_counts = {};
     Bands& solved = fine_factor > 1 ? fine_bands : bands;
     const MetricGrid& solve_grid = solved.grid();
     Image fine_height, fine_marks;
-    if (fine_factor > 1 && height && !fine_heights) fine_height = UpsampleLinear(*height, fine_factor);
-    const Image* solve_height = fine_factor > 1 ? (height ? (fine_heights ? fine_heights : &fine_height) : nullptr) : height;
+    if (fine_factor > 1 && height && !role.fine_heights) fine_height = UpsampleLinear(*height, fine_factor);
+    const Image* solve_height = fine_factor > 1 ? (height ? (role.fine_heights ? role.fine_heights : &fine_height) : nullptr) : height;
     const Image* marks = marks_from;
     if (fine_factor > 1 && marks_from) {
-      if (marks_from == height && fine_heights) {
-        marks = fine_heights;
+      if (marks_from == height && role.fine_heights) {
+        marks = role.fine_heights;
       } else if (marks_from == &shadow_height && !fine_shadow_height.empty()) {
         marks = &fine_shadow_height;
       } else if (marks_from == height) {
@@ -298,7 +296,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         marks = &fine_marks;
       }
     }
-    if (keep_fine && fine_factor > 1 && fine_last_normal.empty()) {
+    if (role.keep_fine && fine_factor > 1 && fine_last_normal.empty()) {
       fine_last_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_last_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
     }
@@ -331,12 +329,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        : reconstruction::SolvePhotometricStereoAt(band, ps_options, band_height);
       kept_pixels += band_ps.kept_pixels;
       if ((role.keep_whole || again_in_place) && fine_factor > 1) PasteBand(band_ps, solved.Row0(b), &fine_first);
-      if (gather_fine_sample && fine_factor > 1) {
+      if (role.gather_fine_sample && fine_factor > 1) {
         AddToSample(band, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_ps.albedo, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
       }
-      if (keep_fine && fine_factor > 1) {
+      if (role.keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
       }
