@@ -59,8 +59,8 @@ struct StageOptions {
   // repeating them: with distant lights the marked sweep solves again only the pixels a mark
   // changes (SolvePhotometricStereoAgain, from the first sweep's whole solve: 37 B a fine pixel
   // with a finer grid), and with a finer grid the fit's fine pass takes the last sweep's fine
-  // normals and albedo (24 B a fine pixel) when that sweep is known before it runs. The same maps
-  // either way; off only for tests.
+  // normals and albedo (24 B a fine pixel) and cast-shadow marks (1 bit a fine pixel and light)
+  // when that sweep is known before it runs. The same maps either way; off only for tests.
   bool reuse_band_solves = true;
 };
 

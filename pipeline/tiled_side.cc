@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "capture/stack_builder.h"
+#include "pipeline/band_shadow_marks.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/fine_colour.h"
@@ -258,13 +259,16 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // round, leave them empty and the fit solves the fine bands again at the kept round's heights.
   bool keep_last_fine_solve = false;  // set below, once the sample tells the lights
   Image fine_fit_normal, fine_fit_albedo;
+  // With them, that sweep's cast-shadow marks on the fine bands (1 bit a fine pixel and light): the
+  // fit's fine pass marks from the same heights, so it takes them instead of marching again.
+  BandShadowMarks fine_band_marks;
   Image shadow_height;  // the whole-map heights the final marks come from (empty: marking off)
   // What one sweep keeps or reuses besides its maps.
   struct SweepRole {
     bool keep_fine = false;                // the fine bands' normals and confidence into fine_last_*
     const Image* fine_heights = nullptr;   // the solve's heights on the fine grid (see above)
     bool gather_fine_sample = false;       // the fit's sample of the finer grid, from this sweep's solves
-    bool last_sweep = false;               // the fit's fine pass takes this sweep's fine solves (keep_last_fine_solve)
+    bool last_sweep = false;               // the fit's fine pass takes this sweep's fine solves and marks (keep_last_fine_solve)
     bool keep_whole = false;               // the whole solve kept to be solved again (fine_first, or the maps)
     const PhotometricStereoResult* earlier = nullptr;  // solve again from it: only pixels with a new mark
   };
@@ -316,6 +320,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         const reconstruction::CastShadowCounts counts = mark(*marks, solve_grid, &band);
         shadow_counts.marked += counts.marked;
         shadow_counts.examined += counts.examined;
+        if (keep_for_fit) {
+          if (fine_band_marks.empty()) {
+            fine_band_marks = BandShadowMarks(solve_grid.width, solve_grid.height, static_cast<int>(band.lights.size()));
+          }
+          fine_band_marks.Keep(band, solved.Row0(b));
+        }
       }
       const double start = StageClock();
       const Image band_height =
@@ -640,8 +650,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // Its normals and albedo (the surface's heights are the caller's to add).
   auto fine_band_surface = [&](int b, Stack* band) -> fitting::SurfaceGeometry {
     *band = fine_bands.Build(frames, b);
-    if (!fine_marks.empty()) mark(fine_marks, fine_grid, band);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
+    if (!fine_band_marks.empty()) {
+      const double start = StageClock();
+      fine_band_marks.Apply(row0, band);
+      shadow_seconds += StageClock() - start;
+    } else if (!fine_marks.empty()) {
+      mark(fine_marks, fine_grid, band);
+    }
     if (!fine_fit_normal.empty()) return {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image()};
     PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
         *band, ps_options,
@@ -728,6 +744,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
     fine_fit_normal = fine_fit_albedo = Image();  // before the fine integration's work space
+    fine_band_marks = BandShadowMarks();
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
                                               fine_factor, grid.pitch_mm, near, options, progress, placement,
                                               &out.fit.normals);

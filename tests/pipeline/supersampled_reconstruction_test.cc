@@ -160,7 +160,8 @@ TEST(SupersampledReconstruction, BandsOfANearRigRefineTheirHeightsOnTheFinerGrid
 
 // In bands with distant lights, sweeps reuse earlier sweeps' solves (StageOptions::reuse_band_solves):
 // the marked sweep solves again only the pixels a mark changes, and with a finer grid the fit's fine
-// pass takes the last sweep's fine normals and albedo instead of solving every fine band once more.
+// pass takes the last sweep's fine normals, albedo and cast-shadow marks instead of solving and
+// marking every fine band once more.
 // The maps must be bit for bit those of the run that solves everything again, and the report says
 // what was reused. Run on the maps' grid (factor 1) and on the 2x finer grid.
 void ExpectReusedBandSolvesGiveTheSameMaps(const test::TempDir& dir, const std::filesystem::path& synth, int factor) {
