@@ -175,11 +175,22 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
   return stack;
 }
 
-StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds) {
+StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds,
+                          double solved_again_share) {
   if (!options.mark_cast_shadows) return {"cast shadows", false, "off: shadows are only dark or outlier data", 0.0};
-  char detail[160];
-  std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the %s", 100.0 * share,
-                near ? "refined heights, every round" : "integrated heights, then solved again");
+  char detail[200];
+  if (near) {
+    std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the refined heights, every round",
+                  100.0 * share);
+  } else if (solved_again_share >= 0.0) {
+    std::snprintf(detail, sizeof detail,
+                  "%.2f %% of the observations marked from the integrated heights, then %.1f %% of the pixels solved "
+                  "again (the others carry no new mark)",
+                  100.0 * share, 100.0 * solved_again_share);
+  } else {
+    std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the integrated heights, then solved again",
+                  100.0 * share);
+  }
   return {"cast shadows", true, detail, seconds};
 }
 
@@ -207,6 +218,7 @@ SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, co
     out.photometric_stereo = reconstruction::RunPhotometricStereoMarkingShadows(stack, options.photometric_stereo,
                                                                                 options.cast_shadows, &shadows, progress);
     out.cast_shadow_share = shadows.counts.share();
+    out.cast_shadow_solved_again_share = shadows.solved_again_share;
   } else {
     out.photometric_stereo = reconstruction::RunPhotometricStereo(*stack, options.photometric_stereo, progress);
   }
@@ -216,7 +228,8 @@ SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, co
                            near ? "near point lights, height refined " + std::to_string(ps.near_iterations) + " rounds"
                                 : "distant lights",
                            StageClock() - start - shadows.mark_seconds});
-  report->steps.push_back(CastShadowStep(options, out.cast_shadow_share, near, shadows.mark_seconds));
+  report->steps.push_back(
+      CastShadowStep(options, out.cast_shadow_share, near, shadows.mark_seconds, out.cast_shadow_solved_again_share));
   if (!near) {
     report->steps.push_back({"near-light refinement", false,
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});

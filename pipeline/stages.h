@@ -50,6 +50,9 @@ struct SideReconstruction {
   Image valid;      // 1 channel: 1 where the surface is data (not a hole, seen by the camera)
   // Share of the (pixel, observation) pairs marked kCastShadow (0 when marking is off).
   double cast_shadow_share = 0.0;
+  // Share of the pixels photometric stereo solved again after the marks (-1: not a single second
+  // solve, e.g. near-light rounds or marking off).
+  double cast_shadow_solved_again_share = -1.0;
 };
 
 // Marks the stack's cast shadows (kCastShadow) when options.mark_cast_shadows, so that FitSide and
@@ -75,7 +78,9 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
                            RunReport* report, const ProgressCallback& progress = {});
 
 // The report's "cast shadows" step: off, or the share marked and the marking time (seconds).
-StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds);
+// solved_again_share: of the pixels, after the marks (< 0: not told).
+StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds,
+                          double solved_again_share = -1.0);
 
 // After the fit: the fit's refined normals (FitResult::normals; nothing happens when it is empty)
 // replace the photometric-stereo normals in `side`, and the height is integrated again from them

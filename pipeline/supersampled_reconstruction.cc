@@ -154,8 +154,10 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   if (options.mark_cast_shadows) {
     reconstruction::MarkCastShadows(out.height_mm, stack, options.cast_shadows);
     out.cast_shadow_share = fine_side.cast_shadow_share;
+    out.cast_shadow_solved_again_share = fine_side.cast_shadow_solved_again_share;
   }
-  report->steps.push_back(CastShadowStep(options, out.cast_shadow_share, near, StageClock() - start));
+  report->steps.push_back(
+      CastShadowStep(options, out.cast_shadow_share, near, StageClock() - start, out.cast_shadow_solved_again_share));
   if (keep_fine && every_observation) {
     keep_fine->k = k;
     keep_fine->stack = std::move(fine);

@@ -144,15 +144,6 @@ PhotometricStereoResult CropPs(const PhotometricStereoResult& whole, int row0, i
   return band;
 }
 
-// The report's words for the share of pixels the marked sweep solved again (< 0: every one was).
-std::string SolvedAgainDetail(double share) {
-  if (share < 0.0) return "";
-  char detail[120];
-  std::snprintf(detail, sizeof detail, "; after the cast-shadow marks %.1f %% of the pixels solved again (the others carry no new mark)",
-                100.0 * share);
-  return detail;
-}
-
 // Mean angle between two normal maps, degrees (as RunPhotometricStereo's refinement measures it).
 fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   fitting::FitResult band;
@@ -231,7 +222,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // (SolvePhotometricStereoAgain, as one band does); that sweep updates it in place, and the fit
   // takes its normals and albedo. Without a fine factor the first sweep's full maps serve.
   PhotometricStereoResult fine_first;
-  double solved_again_share = -1.0;  // of the solve grid's pixels, in the sweep that solved again (-1: none did)
+  double solved_again_share = -1.0;  // of the solve grid's pixels, in the marked sweep (-1: none ran)
 
   // One sweep of photometric stereo at the given heights (nullptr: the anchor plane), the bands'
   // cast shadows marked from the whole-map heights `marks_from` (nullptr: none). With a fine factor
@@ -362,7 +353,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       solve_seconds += StageClock() - start;
       ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
     }
-    if (role.earlier) {
+    if (marks) {  // every pixel solved again, but those an earlier solve kept
       solved_again_share = 1.0 - static_cast<double>(kept_pixels) / (static_cast<double>(solve_grid.width) * solve_grid.height);
     }
     if (again_in_place) {
@@ -557,8 +548,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                                        (near_rounds_capped ? ", at most " + std::to_string(near_round_limit) + " in bands)" : ")")
                                  : std::string("distant lights")) +
                                (fine_factor > 1 ? "; each band solved on the finer grid, its unit normals averaged onto the maps' grid"
-                                      : "") +
-                               SolvedAgainDetail(solved_again_share),
+                                      : ""),
                            solve_seconds});
   if (!near) {
     report->steps.push_back({"near-light refinement", false,
@@ -617,6 +607,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     report->steps.push_back({"relief registration " + side, true, detail, StageClock() - relief_start});
   }
   out.reconstruction.cast_shadow_share = shadow_height.empty() ? 0.0 : shadow_counts.share();
+  out.reconstruction.cast_shadow_solved_again_share = shadow_height.empty() || near ? -1.0 : solved_again_share;
   IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
   const SideReconstruction& geometry = out.reconstruction;
 
@@ -804,7 +795,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.residual_mean = residual_pixels ? residual_sum / static_cast<double>(residual_pixels) : 0.0;
   report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", StageClock() - start});
   // Marking time of every sweep (photometric stereo, fit, residual), with the integration it needed.
-  report->steps.push_back(CastShadowStep(options, out.reconstruction.cast_shadow_share, near, shadow_seconds));
+  report->steps.push_back(CastShadowStep(options, out.reconstruction.cast_shadow_share, near, shadow_seconds,
+                                         out.reconstruction.cast_shadow_solved_again_share));
 
   // Held-out lights: CheckHeldOutLights band by band (marks from the final heights, timed here).
   if (!held_out_frames.empty()) {

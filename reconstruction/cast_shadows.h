@@ -72,6 +72,9 @@ CastShadowCounts MarkCastShadows(const Image& height_mm, Stack* stack, const Cas
 struct ShadowMarkingSummary {
   CastShadowCounts counts;   // the marks the returned result was solved with
   double mark_seconds = 0;   // wall time of the marking and of the integration it needed (distant lights)
+  // Share of the pixels solved again after the marks (distant lights: those with a mark or solved
+  // from their neighbours; 0 when nothing was marked; 1 with point lights); -1 for near-light rounds.
+  double solved_again_share = -1.0;
 };
 
 // Photometric stereo that leaves cast shadows out (sets kCastShadow on `stack`):

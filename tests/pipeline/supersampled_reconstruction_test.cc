@@ -79,6 +79,14 @@ TEST(SupersampledReconstruction, ACameraAtTwiceTheMapsDpiGivesCloserNormalsAndHe
   EXPECT_NE(FindStep(finer.result.report, "photometric stereo (ls, 2x finer grid)"), nullptr);
   EXPECT_NE(FindStep(finer.result.report, "integration of the fitted normals (on the finer grid)"), nullptr);
   EXPECT_EQ(FindStep(on_grid.result.report, "photometric stereo (ls, 2x finer grid)"), nullptr);
+  // One band: after the cast-shadow marks only the pixels a mark changes are solved again, and the
+  // report says how many (on the fine grid's solve with the finer grid).
+  for (const RunReport* report : {&on_grid.result.report, &finer.result.report}) {
+    const StepRecord* marks = FindStep(*report, "cast shadows");
+    ASSERT_NE(marks, nullptr);
+    EXPECT_NE(marks->reason.find("% of the pixels solved again"), std::string::npos) << marks->reason;
+    EXPECT_EQ(marks->reason.find("then 100.0 %"), std::string::npos) << marks->reason;
+  }
   ASSERT_GT(finer.evaluation.pixels_compared, 0);
   EXPECT_EQ(finer.evaluation.pixels_compared, on_grid.evaluation.pixels_compared);
   EXPECT_LT(finer.evaluation.normal_mean_deg, kMaxNormalErrorRatio * on_grid.evaluation.normal_mean_deg);
@@ -188,10 +196,12 @@ void ExpectReusedBandSolvesGiveTheSameMaps(const test::TempDir& dir, const std::
     }
     return std::string();
   };
-  const std::string solved_again = "after the cast-shadow marks";
-  EXPECT_NE(reason(reused_report, "photometric stereo").find(solved_again), std::string::npos)
-      << reason(reused_report, "photometric stereo");
-  EXPECT_EQ(reason(again_report, "photometric stereo").find(solved_again), std::string::npos);
+  // The cast-shadow step gives the share of the pixels solved again after the marks: all of them
+  // without the reuse.
+  const std::string reused_marks = reason(reused_report, "cast shadows"), again_marks = reason(again_report, "cast shadows");
+  EXPECT_NE(reused_marks.find("% of the pixels solved again"), std::string::npos) << reused_marks;
+  EXPECT_EQ(reused_marks.find("then 100.0 %"), std::string::npos) << reused_marks;
+  EXPECT_NE(again_marks.find("then 100.0 % of the pixels solved again"), std::string::npos) << again_marks;
   if (factor > 1) {
     EXPECT_NE(reason(reused_report, "fit").find("the last sweep's fine solves kept"), std::string::npos) << reason(reused_report, "fit");
     EXPECT_NE(reason(again_report, "fit").find("solved again"), std::string::npos) << reason(again_report, "fit");
