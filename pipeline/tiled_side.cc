@@ -244,8 +244,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   fitting::SurfaceGeometry fine_sample_geometry;  // its normals and albedo (the heights once integrated)
   bool fine_sample_gathered = false;
   // The last sweep's fine normals and albedo, kept whole for the fit's fine pass (24 B a fine pixel)
-  // so that it does not solve every fine band once more: on the 36 MP plain a sweep of photometric
-  // stereo on the fine bands is about 200 s. Kept when the last sweep is known before it runs
+  // so that it does not solve every fine band once more (the 36 MP plain's fine pass of the fit
+  // 588 -> 395 s, docs/process.md). Kept when the last sweep is known before it runs
   // (distant lights, or near ones not refined); near-light rounds, which may end on a rejected
   // round, leave them empty and the fit solves the fine bands again at the kept round's heights.
   bool keep_last_fine_solve = false;  // set below, once the sample tells the lights
