@@ -178,19 +178,14 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
 StepRecord CastShadowStep(const StageOptions& options, double share, bool near, double seconds,
                           double solved_again_share) {
   if (!options.mark_cast_shadows) return {"cast shadows", false, "off: shadows are only dark or outlier data", 0.0};
-  char detail[200];
-  if (near) {
-    std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the refined heights, every round",
-                  100.0 * share);
-  } else if (solved_again_share >= 0.0) {
-    std::snprintf(detail, sizeof detail,
-                  "%.2f %% of the observations marked from the integrated heights, then %.1f %% of the pixels solved "
-                  "again (the others carry no new mark)",
-                  100.0 * share, 100.0 * solved_again_share);
-  } else {
-    std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the integrated heights, then solved again",
-                  100.0 * share);
+  char then[96] = "solved again";
+  if (solved_again_share >= 0.0) {
+    std::snprintf(then, sizeof then, "%.1f %% of the pixels solved again (the others carry no new mark)",
+                  100.0 * solved_again_share);
   }
+  char detail[200];
+  std::snprintf(detail, sizeof detail, "%.2f %% of the observations marked from the %s%s", 100.0 * share,
+                near ? "refined heights, every round" : "integrated heights, then ", near ? "" : then);
   return {"cast shadows", true, detail, seconds};
 }
 

@@ -449,15 +449,17 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     integration.pitch_mm = grid.pitch_mm;
     const double start = StageClock();
     shadow_height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
-    if (!fine_last_normal.empty()) {
+    // The first sweep's fine normals and confidence: kept whole in fine_first, else alone.
+    const bool whole_kept = !fine_first.normal.empty();
+    const Image& fine_normal = whole_kept ? fine_first.normal : fine_last_normal;
+    if (!fine_normal.empty()) {
       integration.pitch_mm = fine_calibration.grid.pitch_mm;
       fine_shadow_height =
-          reconstruction::IntegrateNormals(fine_last_normal, fine_last_confidence, integration).height_mm;
+          reconstruction::IntegrateNormals(fine_normal, whole_kept ? fine_first.confidence : fine_last_confidence,
+                                           integration)
+              .height_mm;
       fine_last_normal = Image();
       fine_last_confidence = Image();
-    } else if (!fine_first.normal.empty()) {
-      integration.pitch_mm = fine_calibration.grid.pitch_mm;
-      fine_shadow_height = reconstruction::IntegrateNormals(fine_first.normal, fine_first.confidence, integration).height_mm;
     }
     shadow_seconds += StageClock() - start;
     const PhotometricStereoResult* earlier = solve_again_after_marks ? (fine_factor > 1 ? &fine_first : &ps) : nullptr;

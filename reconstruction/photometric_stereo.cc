@@ -611,7 +611,6 @@ void CheckSolveAt(const Stack& stack, const PhotometricStereoOptions& options, c
 struct EarlierSolve {
   const PhotometricStereoResult* result = nullptr;  // null: solve every pixel
   std::uint8_t changed_flag = 0;                    // observations flagged so since then
-  std::size_t* kept_pixels = nullptr;               // when not null: how many pixels kept it
 };
 
 // One full solve with every pixel at the given height (mm); with `earlier`, a pixel whose
@@ -689,7 +688,7 @@ PhotometricStereoResult SolveAt(const Solver& solver, const Stack& stack, const 
       }
     kept += chunk_kept;
   });
-  if (earlier.kept_pixels) *earlier.kept_pixels = kept.load();
+  res.kept_pixels = static_cast<long long>(kept.load());
 
   // Pass 2: pixels that need their neighbours (dark, ill-conditioned, albedo near zero).
   std::vector<float> reliable(n);
@@ -866,10 +865,9 @@ PhotometricStereoResult SolvePhotometricStereoAgain(const Stack& stack, const Ph
     throw std::invalid_argument("photometric stereo: a partial solve again needs distant lights (point lights move with the height)");
   }
   SetDiffuseRoughness(solver, stack, options);
-  std::size_t kept = 0;
-  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag, &kept});
+  PhotometricStereoResult result = SolveAt(solver, stack, options, height_mm, EarlierSolve{&previous, changed_flag});
   result.diffuse_roughness = solver.burley() ? solver.roughness() : -1.0;
-  result.kept_pixels = static_cast<long long>(kept);
+  const auto kept = static_cast<std::size_t>(result.kept_pixels);
   LogInfo() << "photometric stereo: solved again " << (100.0 * static_cast<double>(n - kept) / static_cast<double>(n))
             << " % of the pixels (the others carry no new mark)";
   return result;
