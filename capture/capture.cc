@@ -105,7 +105,7 @@ void Capture::Normalise(std::size_t index, const FrameLoadOptions& options, Deco
   }
 }
 
-std::shared_ptr<const CompactFrame> Capture::CachedRaw(std::size_t index) const {
+std::shared_ptr<const CompactFrame> Capture::CachedWhole(std::size_t index) const {
   {
     std::lock_guard<std::mutex> lock(cache_->mutex);
     for (const auto& entry : cache_->entries) {
@@ -114,8 +114,8 @@ std::shared_ptr<const CompactFrame> Capture::CachedRaw(std::size_t index) const 
   }
   // Decode outside the lock: other threads keep reading. Two threads asking for the same frame
   // at once may both decode it; the second insert is dropped.
-  auto decoded = std::make_shared<const CompactFrame>(DecodeRawFrame(FramePath(index), DecodeOptions(index)));
-  if (decoded->bytes() > options_.raw_cache_bytes) return decoded;
+  auto decoded = std::make_shared<const CompactFrame>(DecodeWholeFrame(FramePath(index), DecodeOptions(index)));
+  if (decoded->bytes() > options_.decode_cache_bytes) return decoded;
   std::lock_guard<std::mutex> lock(cache_->mutex);
   for (const auto& entry : cache_->entries) {
     if (entry.first == index) return entry.second;
@@ -123,7 +123,7 @@ std::shared_ptr<const CompactFrame> Capture::CachedRaw(std::size_t index) const 
   // Full: keep the frames already cached and hand this one out uncached. The band sweeps read the
   // frames in the same order every time, so evicting (least recently used) would miss on every
   // read once the frames outnumber the cache; keeping them hits on the cached ones each sweep.
-  if (cache_->bytes + decoded->bytes() > options_.raw_cache_bytes) return decoded;
+  if (cache_->bytes + decoded->bytes() > options_.decode_cache_bytes) return decoded;
   cache_->entries.emplace_front(index, decoded);
   cache_->bytes += decoded->bytes();
   return decoded;
@@ -133,7 +133,7 @@ DecodedFrame Capture::LoadFrame(std::size_t index, const FrameLoadOptions& optio
   const fs::path path = FramePath(index);
   DecodedFrame decoded;
   std::shared_ptr<const CompactFrame> cached;
-  if (IsRawPath(path)) {
+  if (DecodesWhole(path)) {
     std::lock_guard<std::mutex> lock(cache_->mutex);
     for (const auto& entry : cache_->entries) {
       if (entry.first == index) cached = entry.second;
@@ -148,8 +148,8 @@ DecodedFrame Capture::LoadFrameRegion(std::size_t index, int x, int y, int w, in
                                       const FrameLoadOptions& options) const {
   const fs::path path = FramePath(index);
   DecodedFrame decoded;
-  if (IsRawPath(path)) {
-    decoded = CachedRaw(index)->Crop(x, y, w, h);
+  if (DecodesWhole(path)) {
+    decoded = CachedWhole(index)->Crop(x, y, w, h);
   } else {
     decoded = DecodeFrameRegion(path, DecodeOptions(index), x, y, w, h);
   }

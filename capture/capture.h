@@ -5,14 +5,15 @@
 //   - Open() holds only the manifest: no pixel is read (frame headers are checked, not decoded).
 //   - LoadFrame() decodes one whole frame and hands it to the caller (13 bytes a pixel as float
 //     RGB + mask); Capture keeps nothing of it.
-//   - LoadFrameRegion() returns a crop. 16-bit TIFF/PNG, EXR and JPEG files are read row band by
-//     row band, only the rows of the region. RAW files can only be decoded whole, so the decoded
-//     frame is kept in a cache in libraw's 16-bit form (7 bytes a pixel) so that a sweep of row
-//     bands over all frames decodes each RAW once. The cache is bounded by
-//     CaptureOptions::raw_cache_bytes (when full it keeps the frames it has and decodes the others
-//     again on every read: band sweeps read the frames in one order, where dropping the least
-//     recently used would miss every time) and can be emptied with ReleaseCache(). 32 frames of 36 MP: 8.1 GB of cache for a one-decode sweep,
-//     against 15 GB as float.
+//   - LoadFrameRegion() returns a crop. TIFF and EXR files are read row band by row band, only the
+//     rows of the region. RAW files can only be decoded whole, and PNG and JPEG files decode every
+//     row above the region too (DecodesWhole), so such a frame is kept in a cache in 16-bit form
+//     (CompactFrame, 7 bytes a pixel) and a sweep of row bands over all frames decodes each once.
+//     The cache is bounded by CaptureOptions::decode_cache_bytes (when full it keeps the frames it
+//     has and decodes the others again on every read: band sweeps read the frames in one order,
+//     where dropping the least recently used would miss every time) and can be emptied with
+//     ReleaseCache(). 32 frames of 36 MP: 8.1 GB of cache for a one-decode sweep, against 15 GB as
+//     float.
 // Thread safety: all const methods may be called from several threads at once. Copies of a
 // Capture share one cache.
 
@@ -31,9 +32,9 @@
 namespace u3mscan {
 
 struct CaptureOptions {
-  // Upper bound of the RAW decode cache used by LoadFrameRegion, bytes. 0 disables the cache
-  // (each region read of a RAW frame decodes it again).
-  std::size_t raw_cache_bytes = std::size_t{9} << 30;  // 9 GiB: 32 frames of 36 MP
+  // Upper bound of the cache of whole decodes (RAW, PNG, JPEG) used by LoadFrameRegion, bytes. 0
+  // disables the cache (each region read of such a frame decodes it again).
+  std::size_t decode_cache_bytes = std::size_t{9} << 30;  // 9 GiB: 32 frames of 36 MP
   bool Check() const { return true; }
 };
 
@@ -89,7 +90,7 @@ class Capture {
  private:
   Capture() = default;
   void Normalise(std::size_t index, const FrameLoadOptions& options, DecodedFrame* frame) const;
-  std::shared_ptr<const CompactFrame> CachedRaw(std::size_t index) const;
+  std::shared_ptr<const CompactFrame> CachedWhole(std::size_t index) const;
 
   std::shared_ptr<const Manifest> manifest_;
   std::filesystem::path folder_;

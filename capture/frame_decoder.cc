@@ -311,6 +311,47 @@ void CheckJpegComplete(const fs::path& path) {
   }
 }
 
+// How a value OIIO delivers as float (code / code_max for integer files) becomes linear data, and
+// whether it is at the white level. One rule for region reads and for the code tables of
+// CompactFrame (DecodeOiioCompact), so both give the same floats to the bit.
+struct OiioValueRule {
+  FrameEncoding encoding = FrameEncoding::kLinear;
+  bool has_white = true;
+  float black = 0.0f, white = 1.0f, inv_range = 1.0f;
+  // For 8-bit data the file's top code is the white level.
+  static constexpr float kSrgbWhite = 254.5f / 255.0f;
+
+  OiioValueRule(const OiioLayout& layout, const OIIO::ImageSpec& spec, const FrameDecodeOptions& options)
+      : encoding(layout.encoding) {
+    // Response: levels in code values, applied to linear data only.
+    double black_code = 0.0, white_code = layout.code_max;
+    if (layout.encoding == FrameEncoding::kLinear && options.response) {
+      black_code = options.response->black_level;
+      white_code = options.response->white_level;
+    }
+    const bool float_file = layout.code_max == 1.0 && spec.format != OIIO::TypeDesc::UINT8;
+    // Float files without a response have no white level: nothing saturates but non-finite values.
+    has_white = !(float_file && !options.response);
+    inv_range = static_cast<float>(layout.code_max / (white_code - black_code));
+    black = static_cast<float>(black_code / layout.code_max);
+    white = static_cast<float>(white_code / layout.code_max);
+  }
+
+  // Linear value of file value v; sets *saturated when v is not data.
+  float Linear(float v, bool* saturated) const {
+    if (!std::isfinite(v)) {
+      *saturated = true;
+      return 0.0f;
+    }
+    if (encoding == FrameEncoding::kSrgb) {
+      *saturated = *saturated || v >= kSrgbWhite;
+      return SrgbToLinear(v);
+    }
+    *saturated = *saturated || (has_white && v >= white);
+    return (v - black) * inv_range;
+  }
+};
+
 DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& options, int x, int y, int w, int h,
                               bool whole) {
   auto in = OpenOiio(path);
@@ -329,22 +370,7 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
   out.encoding = layout.encoding;
   out.rgb = Image(w, h, 3);
   out.saturated.assign(static_cast<std::size_t>(w) * h, 0);
-
-  // Response: levels in code values, applied to linear data only.
-  double black = 0.0, white = layout.code_max;
-  const bool linear = layout.encoding == FrameEncoding::kLinear;
-  if (linear && options.response) {
-    black = options.response->black_level;
-    white = options.response->white_level;
-  }
-  const bool float_file = layout.code_max == 1.0 && spec.format != OIIO::TypeDesc::UINT8;
-  // Float files without a response have no white level: nothing saturates but non-finite values.
-  const bool has_white = !(float_file && !options.response);
-  const float inv_range = static_cast<float>(layout.code_max / (white - black));
-  const float black_f = static_cast<float>(black / layout.code_max);
-  const float white_f = static_cast<float>(white / layout.code_max);
-  // For 8-bit data the file's top code is the white level.
-  const float srgb_white = 254.5f / 255.0f;
+  const OiioValueRule rule(layout, spec, options);
 
   const int nch = spec.nchannels;
   // Scanline files are read in bands of kRowsPerRead full rows; tiled files one row of tiles at
@@ -382,22 +408,86 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
         for (int c = 0; c < w; ++c) {
           const float* px = src + static_cast<std::size_t>(c) * nch;
           bool saturated = false;
-          for (int k = 0; k < 3; ++k) {
-            const float v = px[nch >= 3 ? k : 0];  // grey files feed all three channels
-            float lin;
-            if (!std::isfinite(v)) {
-              saturated = true;
-              lin = 0.0f;
-            } else if (layout.encoding == FrameEncoding::kSrgb) {
-              saturated = saturated || v >= srgb_white;
-              lin = SrgbToLinear(v);
-            } else {
-              saturated = saturated || (has_white && v >= white_f);
-              lin = (v - black_f) * inv_range;
-            }
-            out.rgb.at(k, out_row, c) = lin;
-          }
+          // Grey files feed all three channels.
+          for (int k = 0; k < 3; ++k) out.rgb.at(k, out_row, c) = rule.Linear(px[nch >= 3 ? k : 0], &saturated);
           sat[c] = saturated ? 1 : 0;
+        }
+      }
+    });
+  }
+  in->close();
+  return out;
+}
+
+// A PNG or JPEG frame whole, as its code values (16 bits a channel, 8-bit codes widened) and a
+// table from code to linear value built with the rule and OIIO's own conversion to float, so a
+// crop equals DecodeOiioRegion's read of the same rows to the bit. Read top to bottom in bands
+// of kRowsPerRead rows: these formats decode from the top, so one pass costs what a read of the
+// last rows costs.
+CompactFrame DecodeOiioCompact(const fs::path& path, const FrameDecodeOptions& options) {
+  auto in = OpenOiio(path);
+  const OIIO::ImageSpec spec = in->spec();
+  const OiioLayout layout = LayoutOf(path, spec);
+  if (spec.format != OIIO::TypeDesc::UINT8 && spec.format != OIIO::TypeDesc::UINT16) {
+    throw std::invalid_argument(path.string() + ": a compact frame holds 8- or 16-bit codes, the file holds " +
+                                std::string(spec.format.c_str()));
+  }
+  CheckJpegComplete(path);
+  const OiioValueRule rule(layout, spec, options);
+  const int codes = static_cast<int>(layout.code_max) + 1;
+  CompactFrame out;
+  out.width = spec.width;
+  out.height = spec.height;
+  out.encoding = layout.encoding;
+  out.linear_of_code.resize(codes);
+  std::vector<std::uint8_t> saturated_code(codes, 0);
+  for (int code = 0; code < codes; ++code) {
+    const std::uint16_t code16 = static_cast<std::uint16_t>(code);
+    const std::uint8_t code8 = static_cast<std::uint8_t>(code);
+    float v = 0.0f;
+    OIIO::convert_pixel_values(spec.format, spec.format == OIIO::TypeDesc::UINT8 ? static_cast<const void*>(&code8) : &code16,
+                               OIIO::TypeDesc::FLOAT, &v, 1);
+    bool saturated = false;
+    out.linear_of_code[code] = rule.Linear(v, &saturated);
+    saturated_code[code] = saturated ? 1 : 0;
+  }
+  const std::size_t pixels = static_cast<std::size_t>(out.width) * out.height;
+  out.rgb16.resize(pixels * 3);
+  out.saturated.assign(pixels, 0);
+  const int nch = spec.nchannels;
+  const bool bytes = spec.format == OIIO::TypeDesc::UINT8;
+  // The file's own codes, read as stored (no conversion).
+  std::vector<std::uint8_t> buffer8;
+  std::vector<std::uint16_t> buffer16;
+  for (int band = 0; band < spec.height; band += kRowsPerRead) {
+    const int band_end = std::min(spec.height, band + kRowsPerRead);
+    const std::size_t values = static_cast<std::size_t>(band_end - band) * spec.width * nch;
+    void* data = nullptr;
+    if (bytes) {
+      buffer8.resize(values);
+      data = buffer8.data();
+    } else {
+      buffer16.resize(values);
+      data = buffer16.data();
+    }
+    const bool ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, spec.format, data);
+    if (!ok || in->has_error()) {
+      throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
+    }
+    ParallelFor(static_cast<std::size_t>(band_end - band), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        const std::size_t row = static_cast<std::size_t>(band) + i;
+        for (int c = 0; c < spec.width; ++c) {
+          const std::size_t p = row * spec.width + c;
+          const std::size_t src = (i * spec.width + c) * nch;
+          std::uint8_t saturated = 0;
+          for (int k = 0; k < 3; ++k) {
+            const std::size_t at = src + (nch >= 3 ? k : 0);  // grey files feed all three channels
+            const std::uint16_t code = bytes ? buffer8[at] : buffer16[at];
+            out.rgb16[p * 3 + k] = code;
+            saturated |= saturated_code[code];
+          }
+          out.saturated[p] = saturated;
         }
       }
     });
@@ -411,6 +501,11 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
 bool IsRawPath(const fs::path& path) {
   const std::string ext = Lower(path.extension().string());
   return !(ext == ".tif" || ext == ".tiff" || ext == ".png" || ext == ".exr" || ext == ".jpg" || ext == ".jpeg");
+}
+
+bool DecodesWhole(const fs::path& path) {
+  const std::string ext = Lower(path.extension().string());
+  return IsRawPath(path) || ext == ".png" || ext == ".jpg" || ext == ".jpeg";
 }
 
 FrameHeader ReadFrameHeader(const fs::path& path) {
@@ -433,15 +528,19 @@ FrameHeader ReadFrameHeader(const fs::path& path) {
 DecodedFrame CompactFrame::Crop(int x, int y, int w, int h) const {
   CheckRegion("frame", width, height, x, y, w, h);
   DecodedFrame out;
-  out.encoding = FrameEncoding::kRaw;
+  out.encoding = encoding;
   out.rgb = Image(w, h, 3);
   out.saturated.resize(static_cast<std::size_t>(w) * h);
+  const bool table = !linear_of_code.empty();
   ParallelFor(static_cast<std::size_t>(h), [&](std::size_t b, std::size_t e) {
     for (std::size_t r = b; r < e; ++r) {
       const std::size_t src_row = static_cast<std::size_t>(y) + r;
       const std::uint16_t* src = rgb16.data() + (src_row * width + x) * 3;
       for (int c = 0; c < w; ++c) {
-        for (int k = 0; k < 3; ++k) out.rgb.at(k, static_cast<int>(r), c) = src[c * 3 + k] * scale;
+        for (int k = 0; k < 3; ++k) {
+          const std::uint16_t code = src[c * 3 + k];
+          out.rgb.at(k, static_cast<int>(r), c) = table ? linear_of_code[code] : code * scale;
+        }
       }
       std::copy_n(saturated.data() + src_row * width + x, w, out.saturated.data() + r * w);
     }
@@ -449,9 +548,9 @@ DecodedFrame CompactFrame::Crop(int x, int y, int w, int h) const {
   return out;
 }
 
-CompactFrame DecodeRawFrame(const fs::path& path, const FrameDecodeOptions& options) {
-  if (!IsRawPath(path)) throw std::invalid_argument(path.string() + ": not a RAW file path");
-  return DecodeRaw(path, options);
+CompactFrame DecodeWholeFrame(const fs::path& path, const FrameDecodeOptions& options) {
+  if (!DecodesWhole(path)) throw std::invalid_argument(path.string() + ": not a RAW, PNG or JPEG file path");
+  return IsRawPath(path) ? DecodeRaw(path, options) : DecodeOiioCompact(path, options);
 }
 
 DecodedFrame DecodeFrame(const fs::path& path, const FrameDecodeOptions& options) {

@@ -57,6 +57,9 @@ inline constexpr int kMaxFrameSide = 1 << 16;
 // Which decoder a path goes to: .tif/.tiff/.png/.exr/.jpg/.jpeg -> OpenImageIO, anything else
 // (.dng, .cr2, .nef, .arw, ...) -> libraw.
 bool IsRawPath(const std::filesystem::path& path);
+// Files a region read costs a whole decode of, or nearly: RAW (libraw decodes whole) and PNG and
+// JPEG (decoded from the top row down to the region's last). Capture keeps them as CompactFrame.
+bool DecodesWhole(const std::filesystem::path& path);
 
 // Size and encoding from the header only (libraw's metadata parse / OIIO's open): no decoding.
 FrameHeader ReadFrameHeader(const std::filesystem::path& path);
@@ -64,25 +67,34 @@ FrameHeader ReadFrameHeader(const std::filesystem::path& path);
 DecodedFrame DecodeFrame(const std::filesystem::path& path, const FrameDecodeOptions& options = {});
 
 // A region [x, x+w) x [y, y+h) of a frame, equal to the same crop of DecodeFrame. OpenImageIO
-// files read only the rows of the region; RAW files are decoded whole (use DecodeRawFrame and
-// CompactFrame::Crop to keep one decode for many regions).
+// files read only the rows of the region (PNG and JPEG decode every row above it too); RAW files
+// are decoded whole (use DecodeWholeFrame and CompactFrame::Crop to keep one decode for many
+// regions).
 DecodedFrame DecodeFrameRegion(const std::filesystem::path& path, const FrameDecodeOptions& options, int x, int y,
                                int w, int h);
 
-// A RAW frame as libraw delivers it: 16 bits per channel, interleaved RGB, plus the mask:
-// 7 bytes a pixel instead of 13 as float. What Capture caches for region reads of RAW files.
+// A whole frame in 16 bits a channel, interleaved RGB, plus the mask: 7 bytes a pixel instead of
+// 13 as float. RAW frames as libraw delivers them; PNG and JPEG frames as their file's codes with
+// a table from code to linear value. What Capture caches for region reads of such files
+// (DecodesWhole); a crop equals DecodeFrameRegion's read of the same region to the bit.
 struct CompactFrame {
   int width = 0;
   int height = 0;
+  FrameEncoding encoding = FrameEncoding::kRaw;
   std::vector<std::uint16_t> rgb16;     // interleaved R, G, B
   std::vector<std::uint8_t> saturated;  // width*height
-  float scale = 1.0f;                   // linear value = rgb16 * scale
+  float scale = 1.0f;                   // linear value = rgb16 * scale, when linear_of_code is empty
+  std::vector<float> linear_of_code;    // else linear value = linear_of_code[rgb16] (256 or 65536 entries)
 
-  std::size_t bytes() const { return rgb16.size() * sizeof(std::uint16_t) + saturated.size(); }
+  std::size_t bytes() const {
+    return rgb16.size() * sizeof(std::uint16_t) + saturated.size() + linear_of_code.size() * sizeof(float);
+  }
   // Throws std::out_of_range when the region is not inside the frame.
   DecodedFrame Crop(int x, int y, int w, int h) const;
 };
 
-CompactFrame DecodeRawFrame(const std::filesystem::path& path, const FrameDecodeOptions& options = {});
+// A RAW, PNG or JPEG frame (DecodesWhole) decoded whole; std::invalid_argument for another path,
+// InputError for a bad file.
+CompactFrame DecodeWholeFrame(const std::filesystem::path& path, const FrameDecodeOptions& options = {});
 
 }  // namespace u3mscan

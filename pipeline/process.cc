@@ -212,8 +212,9 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   report.preset = PresetName(options.preset);
 
   StageOptions stages = OptionsForPreset(options.preset);
-  // The RAW decode cache gets the same budget as one band's stack (both are bounded by it).
-  stages.capture.raw_cache_bytes = static_cast<std::size_t>(options.max_memory_gib * kGiB);
+  // The decode cache (RAW, PNG, JPEG frames) gets the same budget as one band's stack (both are
+  // bounded by it).
+  stages.capture.decode_cache_bytes = static_cast<std::size_t>(options.max_memory_gib * kGiB);
   if (options.dpi) stages.calibration.dpi = options.dpi;
   if (!options.solver.empty()) stages.photometric_stereo.solver = reconstruction::ParsePsSolver(options.solver);
   if (!options.integrator.empty()) {

@@ -162,7 +162,7 @@ TEST_F(CaptureFolder, RegionsEqualCropsOfFullFrames) {
 TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   const std::size_t frame_bytes = static_cast<std::size_t>(kSize) * kSize * 7;  // 16-bit RGB + mask
   CaptureOptions options;
-  options.raw_cache_bytes = frame_bytes * 3 / 2;  // room for one RAW frame
+  options.decode_cache_bytes = frame_bytes * 3 / 2;  // room for one RAW frame
   const Capture capture = Capture::Open(dir_.path(), options);
   capture.LoadFrameRegion(0, 0, 0, 8, 8);
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
@@ -177,7 +177,7 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
         const DecodedFrame part = capture.LoadFrameRows(index, band, 16);
         const DecodedFrame& full = index == 0 ? full0 : full1;
         EXPECT_EQ(part.rgb.at(2, 3, 40), full.rgb.at(2, band + 3, 40));
-        EXPECT_LE(capture.cached_bytes(), options.raw_cache_bytes);
+        EXPECT_LE(capture.cached_bytes(), options.decode_cache_bytes);
       }
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.LoadFrameRegion(3, 0, 0, 8, 8);           // TIFF regions are read directly
@@ -186,9 +186,40 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   EXPECT_EQ(capture.cached_bytes(), 0u);
 
   CaptureOptions none;
-  none.raw_cache_bytes = 0;
+  none.decode_cache_bytes = 0;
   const Capture uncached = Capture::Open(dir_.path(), none);
   uncached.LoadFrameRegion(0, 0, 0, 8, 8);
+  EXPECT_EQ(uncached.cached_bytes(), 0u);
+}
+
+TEST(CapturePngFrames, RegionReadsDecodeEachPngOnceAndGiveTheFilesRows) {
+  // PNG decodes from the top row, so a row band's read costs the rows above it too: Capture keeps
+  // PNG frames whole (CompactFrame) within the same budget as RAW ones.
+  TempDir dir;
+  Manifest manifest = MakeManifest(kSize, kSize, ".png");
+  for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
+    const fs::path path = dir.path() / manifest.frames[i].file;
+    fs::create_directories(path.parent_path());
+    WriteImageFile(SmoothRgb(kSize, kSize, 0.05f * (i + 1), 0.9f), path, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  }
+  WriteManifest(manifest, dir.path());
+  const std::size_t frame_bytes = static_cast<std::size_t>(kSize) * kSize * 7 + 65536 * sizeof(float);
+  const Capture capture = Capture::Open(dir.path());
+  CaptureOptions none;
+  none.decode_cache_bytes = 0;
+  const Capture uncached = Capture::Open(dir.path(), none);
+  FrameLoadOptions norm;
+  norm.divide_by_exposure = true;
+  for (int sweep = 0; sweep < 2; ++sweep)
+    for (int band = 0; band < kSize; band += 16)
+      for (std::size_t index = 0; index < manifest.frames.size(); ++index) {
+        const DecodedFrame part = capture.LoadFrameRows(index, band, 16, norm);
+        const DecodedFrame read = uncached.LoadFrameRows(index, band, 16, norm);
+        for (int k = 0; k < 3; ++k)
+          for (int r = 0; r < 16; ++r)
+            for (int c = 0; c < kSize; ++c) ASSERT_EQ(part.rgb.at(k, r, c), read.rgb.at(k, r, c)) << index;
+      }
+  EXPECT_EQ(capture.cached_bytes(), manifest.frames.size() * frame_bytes);
   EXPECT_EQ(uncached.cached_bytes(), 0u);
 }
 

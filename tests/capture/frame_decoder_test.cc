@@ -8,6 +8,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <random>
@@ -286,6 +287,78 @@ TEST_F(FrameDecoder, RegionEqualsCropOfFullRead) {
       }
     }
     EXPECT_THROW(DecodeFrameRegion(path, {}, 30, 30, 40, 10), std::out_of_range) << path;
+  }
+}
+
+// A 16-bit RGBA PNG: the decoder reads the first three channels.
+void WriteRgbaPng(const Image& img, const fs::path& path) {
+  std::vector<std::uint16_t> pixels(img.pixel_count() * 4, 65535);
+  for (std::size_t i = 0; i < img.pixel_count(); ++i) {
+    for (int k = 0; k < 3; ++k) pixels[i * 4 + k] = static_cast<std::uint16_t>(std::lround(img.plane(k)[i] * 65535.0f));
+  }
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  OIIO::ImageSpec spec(img.width(), img.height(), 4, OIIO::TypeDesc::UINT16);
+  ASSERT_TRUE(out->open(path.string(), spec)) << out->geterror();
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, pixels.data()));
+  out->close();
+}
+
+TEST_F(FrameDecoder, WholeDecodesOfPngAndJpegCropToTheRegionReadsBitForBit) {
+  // Capture keeps PNG and JPEG frames whole as 16-bit codes and a code table (CompactFrame);
+  // every crop must give the floats and flags a region read of the file gives.
+  Image img = truth_;
+  img.at(0, 10, 12) = 1.0f;  // at the container's full scale: saturated
+  img.at(1, 60, 3) = 1.0f;   // in the last rows
+  const fs::path png16 = dir_.path() / "w16.png", png8 = dir_.path() / "w8.png", grey = dir_.path() / "wg.png";
+  const fs::path rgba = dir_.path() / "wa.png", jpg = dir_.path() / "w.jpg";
+  WriteImageFile(img, png16, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  WriteImageFile(img, png8, {SampleFormat::kUInt8, PixelEncoding::kSrgb});
+  Image grey_img(kSize, kSize, 1, 0.0f);
+  for (std::size_t i = 0; i < grey_img.pixel_count(); ++i) grey_img.plane(0)[i] = img.plane(1)[i];
+  WriteImageFile(grey_img, grey, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  WriteRgbaPng(img, rgba);
+  WriteJpeg(img, jpg);
+  FrameDecodeOptions levels;  // a sensor response: black and white levels in codes
+  levels.response = SensorResponse{4096.0, 52000.0};
+  const std::array<std::array<int, 4>, 3> regions = {{{7, 13, 41, 35}, {0, 40, kSize, kSize - 40}, {50, 0, 14, 64}}};
+  for (const fs::path& path : {png16, png8, grey, rgba, jpg}) {
+    ASSERT_TRUE(DecodesWhole(path)) << path;
+    for (const FrameDecodeOptions& options : {FrameDecodeOptions{}, levels}) {
+      const CompactFrame whole = DecodeWholeFrame(path, options);
+      ASSERT_EQ(whole.width, kSize);
+      ASSERT_EQ(whole.height, kSize);
+      EXPECT_EQ(whole.bytes(), static_cast<std::size_t>(kSize) * kSize * 7 + whole.linear_of_code.size() * sizeof(float));
+      int saturated = 0;
+      for (const auto& [x, y, w, h] : regions) {
+        const DecodedFrame part = whole.Crop(x, y, w, h);
+        const DecodedFrame read = DecodeFrameRegion(path, options, x, y, w, h);
+        EXPECT_EQ(part.encoding, read.encoding) << path;
+        for (int r = 0; r < h; ++r) {
+          for (int c = 0; c < w; ++c) {
+            for (int k = 0; k < 3; ++k) ASSERT_EQ(part.rgb.at(k, r, c), read.rgb.at(k, r, c)) << path << " " << r << "," << c;
+            ASSERT_EQ(part.IsSaturated(r, c), read.IsSaturated(r, c)) << path << " " << r << "," << c;
+            saturated += part.IsSaturated(r, c);
+          }
+        }
+      }
+      EXPECT_GT(saturated, 0) << path;  // the flags are compared where there are some
+    }
+  }
+  // TIFF and EXR regions are read by rows: not whole decodes.
+  const fs::path tif = dir_.path() / "w.tif";
+  WriteImageFile(img, tif, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  EXPECT_FALSE(DecodesWhole(tif));
+  EXPECT_FALSE(DecodesWhole(dir_.path() / "w.exr"));
+  EXPECT_TRUE(DecodesWhole(dir_.path() / "w.dng"));
+  EXPECT_THROW(DecodeWholeFrame(tif), std::invalid_argument);
+  // A cut PNG is an InputError naming the file, as a region read of it is.
+  Truncate(png16, 0.6);
+  try {
+    DecodeWholeFrame(png16);
+    ADD_FAILURE() << "decoded a truncated PNG whole";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), png16.string()) << e.what();
   }
 }
 
