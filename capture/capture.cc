@@ -105,6 +105,19 @@ void Capture::Normalise(std::size_t index, const FrameLoadOptions& options, Deco
   }
 }
 
+bool Capture::KeepsWhole(std::size_t index) const {
+  {
+    std::lock_guard<std::mutex> lock(cache_->mutex);
+    if (cache_->keeps_whole.size() != manifest_->frames.size()) cache_->keeps_whole.assign(manifest_->frames.size(), -1);
+    if (cache_->keeps_whole.at(index) >= 0) return cache_->keeps_whole[index] != 0;
+  }
+  // The header is read outside the lock; two threads may both read it and store the same answer.
+  const bool keep = ReadFrameHeader(FramePath(index)).keep_whole;
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  cache_->keeps_whole[index] = keep ? 1 : 0;
+  return keep;
+}
+
 std::shared_ptr<const CompactFrame> Capture::CachedWhole(std::size_t index) const {
   {
     std::lock_guard<std::mutex> lock(cache_->mutex);
@@ -133,7 +146,7 @@ DecodedFrame Capture::LoadFrame(std::size_t index, const FrameLoadOptions& optio
   const fs::path path = FramePath(index);
   DecodedFrame decoded;
   std::shared_ptr<const CompactFrame> cached;
-  if (DecodesWhole(path)) {
+  {
     std::lock_guard<std::mutex> lock(cache_->mutex);
     for (const auto& entry : cache_->entries) {
       if (entry.first == index) cached = entry.second;
@@ -148,7 +161,7 @@ DecodedFrame Capture::LoadFrameRegion(std::size_t index, int x, int y, int w, in
                                       const FrameLoadOptions& options) const {
   const fs::path path = FramePath(index);
   DecodedFrame decoded;
-  if (DecodesWhole(path)) {
+  if (KeepsWhole(index)) {
     decoded = CachedWhole(index)->Crop(x, y, w, h);
   } else {
     decoded = DecodeFrameRegion(path, DecodeOptions(index), x, y, w, h);

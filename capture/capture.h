@@ -5,10 +5,12 @@
 //   - Open() holds only the manifest: no pixel is read (frame headers are checked, not decoded).
 //   - LoadFrame() decodes one whole frame and hands it to the caller (13 bytes a pixel as float
 //     RGB + mask); Capture keeps nothing of it.
-//   - LoadFrameRegion() returns a crop. TIFF and EXR files are read row band by row band, only the
-//     rows of the region. RAW files can only be decoded whole, and PNG and JPEG files decode every
-//     row above the region too (DecodesWhole), so such a frame is kept in a cache in 16-bit form
-//     (CompactFrame, 7 bytes a pixel) and a sweep of row bands over all frames decodes each once.
+//   - LoadFrameRegion() returns a crop. Uncompressed or tiled TIFF and EXR files are read row band
+//     by row band, only the rows of the region. RAW files can only be decoded whole, PNG and JPEG
+//     files decode every row above the region too, and compressed TIFF strips are inflated again
+//     on every sweep (FrameHeader::keep_whole, read once per frame), so such a frame is kept in a
+//     cache in 16-bit form (CompactFrame, 7 bytes a pixel) and the band sweeps over all frames
+//     decode each once.
 //     The cache is bounded by CaptureOptions::decode_cache_bytes (when full it keeps the frames it
 //     has and decodes the others again on every read: band sweeps read the frames in one order,
 //     where dropping the least recently used would miss every time) and can be emptied with
@@ -18,6 +20,7 @@
 // Capture share one cache.
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <list>
 #include <memory>
@@ -91,6 +94,8 @@ class Capture {
   Capture() = default;
   void Normalise(std::size_t index, const FrameLoadOptions& options, DecodedFrame* frame) const;
   std::shared_ptr<const CompactFrame> CachedWhole(std::size_t index) const;
+  // FrameHeader::keep_whole of the frame's file, read on the first call and remembered.
+  bool KeepsWhole(std::size_t index) const;
 
   std::shared_ptr<const Manifest> manifest_;
   std::filesystem::path folder_;
@@ -100,6 +105,7 @@ class Capture {
     std::mutex mutex;
     std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // latest first
     std::size_t bytes = 0;
+    std::vector<std::int8_t> keeps_whole;  // per frame: -1 not read yet, else FrameHeader::keep_whole
   };
   std::shared_ptr<Cache> cache_ = std::make_shared<Cache>();
 };

@@ -419,11 +419,11 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
   return out;
 }
 
-// A PNG or JPEG frame whole, as its code values (16 bits a channel, 8-bit codes widened) and a
-// table from code to linear value built with the rule and OIIO's own conversion to float, so a
-// crop equals DecodeOiioRegion's read of the same rows to the bit. Read top to bottom in bands
-// of kRowsPerRead rows: these formats decode from the top, so one pass costs what a read of the
-// last rows costs.
+// An 8- or 16-bit scanline frame (TIFF, PNG, JPEG) whole, as its code values (16 bits a channel,
+// 8-bit codes widened) and a table from code to linear value built with the rule and OIIO's own
+// conversion to float, so a crop equals DecodeOiioRegion's read of the same rows to the bit. Read
+// top to bottom in bands of kRowsPerRead rows (PNG and JPEG decode from the top: one pass costs
+// what a read of the last rows costs).
 CompactFrame DecodeOiioCompact(const fs::path& path, const FrameDecodeOptions& options) {
   auto in = OpenOiio(path);
   const OIIO::ImageSpec spec = in->spec();
@@ -431,6 +431,9 @@ CompactFrame DecodeOiioCompact(const fs::path& path, const FrameDecodeOptions& o
   if (spec.format != OIIO::TypeDesc::UINT8 && spec.format != OIIO::TypeDesc::UINT16) {
     throw std::invalid_argument(path.string() + ": a compact frame holds 8- or 16-bit codes, the file holds " +
                                 std::string(spec.format.c_str()));
+  }
+  if (spec.tile_width > 0 && spec.tile_height > 0) {
+    throw std::invalid_argument(path.string() + ": a compact frame is read by scanlines, the file is tiled");
   }
   CheckJpegComplete(path);
   const OiioValueRule rule(layout, spec, options);
@@ -503,10 +506,6 @@ bool IsRawPath(const fs::path& path) {
   return !(ext == ".tif" || ext == ".tiff" || ext == ".png" || ext == ".exr" || ext == ".jpg" || ext == ".jpeg");
 }
 
-bool DecodesWhole(const fs::path& path) {
-  const std::string ext = Lower(path.extension().string());
-  return IsRawPath(path) || ext == ".png" || ext == ".jpg" || ext == ".jpeg";
-}
 
 FrameHeader ReadFrameHeader(const fs::path& path) {
   FrameHeader header;
@@ -516,12 +515,21 @@ FrameHeader ReadFrameHeader(const fs::path& path) {
     header.width = s.raw->imgdata.sizes.width;
     header.height = s.raw->imgdata.sizes.height;
     header.encoding = FrameEncoding::kRaw;
+    header.keep_whole = true;
     return header;
   }
   auto in = OpenOiio(path);
-  header.width = in->spec().width;
-  header.height = in->spec().height;
-  header.encoding = LayoutOf(path, in->spec()).encoding;
+  const OIIO::ImageSpec& spec = in->spec();
+  header.width = spec.width;
+  header.height = spec.height;
+  header.encoding = LayoutOf(path, spec).encoding;
+  const std::string ext = Lower(path.extension().string());
+  const bool codes = spec.format == OIIO::TypeDesc::UINT8 || spec.format == OIIO::TypeDesc::UINT16;
+  const bool tiled = spec.tile_width > 0 && spec.tile_height > 0;
+  const bool from_the_top = ext == ".png" || ext == ".jpg" || ext == ".jpeg";
+  const bool compressed_tiff =
+      (ext == ".tif" || ext == ".tiff") && spec.get_string_attribute("compression", "none") != "none";
+  header.keep_whole = codes && !tiled && (from_the_top || compressed_tiff);
   return header;
 }
 
@@ -549,7 +557,6 @@ DecodedFrame CompactFrame::Crop(int x, int y, int w, int h) const {
 }
 
 CompactFrame DecodeWholeFrame(const fs::path& path, const FrameDecodeOptions& options) {
-  if (!DecodesWhole(path)) throw std::invalid_argument(path.string() + ": not a RAW, PNG or JPEG file path");
   return IsRawPath(path) ? DecodeRaw(path, options) : DecodeOiioCompact(path, options);
 }
 

@@ -31,6 +31,11 @@ struct FrameHeader {
   int width = 0;   // pixels of the decoded frame
   int height = 0;
   FrameEncoding encoding = FrameEncoding::kLinear;
+  // Region reads of this file cost a decode worth keeping, so Capture keeps the frame whole
+  // (CompactFrame) for them: RAW (libraw decodes whole), PNG and JPEG (decoded from the top row
+  // down to the region's last) and 8- or 16-bit scanline TIFF stored compressed (every band
+  // sweep inflates its strips again). Not uncompressed or tiled TIFF, nor EXR or float files.
+  bool keep_whole = false;
 };
 
 struct FrameDecodeOptions {
@@ -57,11 +62,9 @@ inline constexpr int kMaxFrameSide = 1 << 16;
 // Which decoder a path goes to: .tif/.tiff/.png/.exr/.jpg/.jpeg -> OpenImageIO, anything else
 // (.dng, .cr2, .nef, .arw, ...) -> libraw.
 bool IsRawPath(const std::filesystem::path& path);
-// Files a region read costs a whole decode of, or nearly: RAW (libraw decodes whole) and PNG and
-// JPEG (decoded from the top row down to the region's last). Capture keeps them as CompactFrame.
-bool DecodesWhole(const std::filesystem::path& path);
 
-// Size and encoding from the header only (libraw's metadata parse / OIIO's open): no decoding.
+// Size, encoding and keep_whole from the header only (libraw's metadata parse / OIIO's open): no
+// decoding.
 FrameHeader ReadFrameHeader(const std::filesystem::path& path);
 
 DecodedFrame DecodeFrame(const std::filesystem::path& path, const FrameDecodeOptions& options = {});
@@ -69,14 +72,14 @@ DecodedFrame DecodeFrame(const std::filesystem::path& path, const FrameDecodeOpt
 // A region [x, x+w) x [y, y+h) of a frame, equal to the same crop of DecodeFrame. OpenImageIO
 // files read only the rows of the region (PNG and JPEG decode every row above it too); RAW files
 // are decoded whole (use DecodeWholeFrame and CompactFrame::Crop to keep one decode for many
-// regions).
+// regions, FrameHeader::keep_whole).
 DecodedFrame DecodeFrameRegion(const std::filesystem::path& path, const FrameDecodeOptions& options, int x, int y,
                                int w, int h);
 
 // A whole frame in 16 bits a channel, interleaved RGB, plus the mask: 7 bytes a pixel instead of
-// 13 as float. RAW frames as libraw delivers them; PNG and JPEG frames as their file's codes with
-// a table from code to linear value. What Capture caches for region reads of such files
-// (DecodesWhole); a crop equals DecodeFrameRegion's read of the same region to the bit.
+// 13 as float. RAW frames as libraw delivers them; 8- and 16-bit files as their codes with a
+// table from code to linear value. What Capture caches for region reads of files whose header
+// says keep_whole; a crop equals DecodeFrameRegion's read of the same region to the bit.
 struct CompactFrame {
   int width = 0;
   int height = 0;
@@ -93,8 +96,8 @@ struct CompactFrame {
   DecodedFrame Crop(int x, int y, int w, int h) const;
 };
 
-// A RAW, PNG or JPEG frame (DecodesWhole) decoded whole; std::invalid_argument for another path,
-// InputError for a bad file.
+// A RAW frame, or an 8- or 16-bit scanline file (TIFF, PNG, JPEG), decoded whole;
+// std::invalid_argument for a float or tiled file, InputError for a bad file.
 CompactFrame DecodeWholeFrame(const std::filesystem::path& path, const FrameDecodeOptions& options = {});
 
 }  // namespace u3mscan

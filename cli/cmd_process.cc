@@ -90,7 +90,7 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "slope of its own (docs/process.md, Levelling)");
   sub.add_option("--max-memory", args->options.max_memory_gib,
                  "Memory budget (GiB) of one band's stack (a larger scan is processed in bands of rows) and, "
-                 "separately, of the cache of frames decoded whole: RAW, PNG, JPEG (docs/process.md, Large scans)")
+                 "separately, of the cache of frames kept whole: RAW, PNG, JPEG, compressed TIFF (docs/process.md, Large scans)")
       ->capture_default_str()
       ->check(CLI::Range(1e-6, 1e6));
   sub.add_option("--name", args->name, "File name of the material (one capture only; default: the capture folder's name)");

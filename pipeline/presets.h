@@ -25,7 +25,7 @@ Preset ParsePreset(const std::string& name);
 
 // Every stage's options, as one preset sets them.
 struct StageOptions {
-  CaptureOptions capture;  // the bound of the cache of frames decoded whole (ProcessCapture: --max-memory)
+  CaptureOptions capture;  // the bound of the cache of frames kept whole (ProcessCapture: --max-memory)
   CalibrationOptions calibration;
   reconstruction::PhotometricStereoOptions photometric_stereo;
   reconstruction::IntegrationOptions integration;  // distant lights (near lights integrate inside PS)

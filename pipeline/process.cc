@@ -212,8 +212,8 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   report.preset = PresetName(options.preset);
 
   StageOptions stages = OptionsForPreset(options.preset);
-  // The decode cache (RAW, PNG, JPEG frames) gets the same budget as one band's stack (both are
-  // bounded by it).
+  // The decode cache (RAW, PNG, JPEG, compressed TIFF frames) gets the same budget as one band's
+  // stack (both are bounded by it).
   stages.capture.decode_cache_bytes = static_cast<std::size_t>(options.max_memory_gib * kGiB);
   if (options.dpi) stages.calibration.dpi = options.dpi;
   if (!options.solver.empty()) stages.photometric_stereo.solver = reconstruction::ParsePsSolver(options.solver);

@@ -180,7 +180,7 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
         EXPECT_LE(capture.cached_bytes(), options.decode_cache_bytes);
       }
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
-  capture.LoadFrameRegion(3, 0, 0, 8, 8);           // TIFF regions are read directly
+  capture.LoadFrameRegion(3, 0, 0, 8, 8);  // a zip TIFF is kept whole too, but the cache is full
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.ReleaseCache();
   EXPECT_EQ(capture.cached_bytes(), 0u);
@@ -192,35 +192,38 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   EXPECT_EQ(uncached.cached_bytes(), 0u);
 }
 
-TEST(CapturePngFrames, RegionReadsDecodeEachPngOnceAndGiveTheFilesRows) {
-  // PNG decodes from the top row, so a row band's read costs the rows above it too: Capture keeps
-  // PNG frames whole (CompactFrame) within the same budget as RAW ones.
-  TempDir dir;
-  Manifest manifest = MakeManifest(kSize, kSize, ".png");
-  for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
-    const fs::path path = dir.path() / manifest.frames[i].file;
-    fs::create_directories(path.parent_path());
-    WriteImageFile(SmoothRgb(kSize, kSize, 0.05f * (i + 1), 0.9f), path, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+TEST(CaptureKeptWholeFrames, RegionReadsDecodeEachPngOrZipTiffOnceAndGiveTheFilesRows) {
+  // PNG decodes from the top row, so a row band's read costs the rows above it too, and a zip
+  // TIFF's strips are inflated again on every sweep: Capture keeps such frames whole
+  // (CompactFrame) within the same budget as RAW ones.
+  for (const std::string ext : {".png", ".tif"}) {
+    TempDir dir;
+    Manifest manifest = MakeManifest(kSize, kSize, ext);
+    for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
+      const fs::path path = dir.path() / manifest.frames[i].file;
+      fs::create_directories(path.parent_path());
+      WriteImageFile(SmoothRgb(kSize, kSize, 0.05f * (i + 1), 0.9f), path, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+    }
+    WriteManifest(manifest, dir.path());
+    const std::size_t frame_bytes = static_cast<std::size_t>(kSize) * kSize * 7 + 65536 * sizeof(float);
+    const Capture capture = Capture::Open(dir.path());
+    CaptureOptions none;
+    none.decode_cache_bytes = 0;
+    const Capture uncached = Capture::Open(dir.path(), none);
+    FrameLoadOptions norm;
+    norm.divide_by_exposure = true;
+    for (int sweep = 0; sweep < 2; ++sweep)
+      for (int band = 0; band < kSize; band += 16)
+        for (std::size_t index = 0; index < manifest.frames.size(); ++index) {
+          const DecodedFrame part = capture.LoadFrameRows(index, band, 16, norm);
+          const DecodedFrame read = uncached.LoadFrameRows(index, band, 16, norm);
+          for (int k = 0; k < 3; ++k)
+            for (int r = 0; r < 16; ++r)
+              for (int c = 0; c < kSize; ++c) ASSERT_EQ(part.rgb.at(k, r, c), read.rgb.at(k, r, c)) << ext << " " << index;
+        }
+    EXPECT_EQ(capture.cached_bytes(), manifest.frames.size() * frame_bytes) << ext;
+    EXPECT_EQ(uncached.cached_bytes(), 0u) << ext;
   }
-  WriteManifest(manifest, dir.path());
-  const std::size_t frame_bytes = static_cast<std::size_t>(kSize) * kSize * 7 + 65536 * sizeof(float);
-  const Capture capture = Capture::Open(dir.path());
-  CaptureOptions none;
-  none.decode_cache_bytes = 0;
-  const Capture uncached = Capture::Open(dir.path(), none);
-  FrameLoadOptions norm;
-  norm.divide_by_exposure = true;
-  for (int sweep = 0; sweep < 2; ++sweep)
-    for (int band = 0; band < kSize; band += 16)
-      for (std::size_t index = 0; index < manifest.frames.size(); ++index) {
-        const DecodedFrame part = capture.LoadFrameRows(index, band, 16, norm);
-        const DecodedFrame read = uncached.LoadFrameRows(index, band, 16, norm);
-        for (int k = 0; k < 3; ++k)
-          for (int r = 0; r < 16; ++r)
-            for (int c = 0; c < kSize; ++c) ASSERT_EQ(part.rgb.at(k, r, c), read.rgb.at(k, r, c)) << index;
-      }
-  EXPECT_EQ(capture.cached_bytes(), manifest.frames.size() * frame_bytes);
-  EXPECT_EQ(uncached.cached_bytes(), 0u);
 }
 
 TEST_F(CaptureFolder, SaturationSurvivesNormalisation) {

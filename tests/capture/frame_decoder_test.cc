@@ -304,14 +304,32 @@ void WriteRgbaPng(const Image& img, const fs::path& path) {
   out->close();
 }
 
-TEST_F(FrameDecoder, WholeDecodesOfPngAndJpegCropToTheRegionReadsBitForBit) {
-  // Capture keeps PNG and JPEG frames whole as 16-bit codes and a code table (CompactFrame);
-  // every crop must give the floats and flags a region read of the file gives.
+// An uncompressed 16-bit TIFF (WriteImageFile compresses TIFF with zip).
+void WriteUncompressedTiff(const Image& img, const fs::path& path) {
+  std::vector<std::uint16_t> pixels(img.pixel_count() * 3);
+  for (std::size_t i = 0; i < img.pixel_count(); ++i) {
+    for (int k = 0; k < 3; ++k) pixels[i * 3 + k] = static_cast<std::uint16_t>(std::lround(img.plane(k)[i] * 65535.0f));
+  }
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  OIIO::ImageSpec spec(img.width(), img.height(), 3, OIIO::TypeDesc::UINT16);
+  spec.attribute("compression", "none");
+  ASSERT_TRUE(out->open(path.string(), spec)) << out->geterror();
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, pixels.data()));
+  out->close();
+}
+
+TEST_F(FrameDecoder, WholeDecodesOfPngJpegAndCompressedTiffCropToTheRegionReadsBitForBit) {
+  // Capture keeps such frames whole as 16-bit codes and a code table (CompactFrame); every crop
+  // must give the floats and flags a region read of the file gives.
   Image img = truth_;
   img.at(0, 10, 12) = 1.0f;  // at the container's full scale: saturated
   img.at(1, 60, 3) = 1.0f;   // in the last rows
   const fs::path png16 = dir_.path() / "w16.png", png8 = dir_.path() / "w8.png", grey = dir_.path() / "wg.png";
   const fs::path rgba = dir_.path() / "wa.png", jpg = dir_.path() / "w.jpg";
+  const fs::path tif16 = dir_.path() / "w16.tif", tif8 = dir_.path() / "w8.tif";  // zip
+  WriteImageFile(img, tif16, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  WriteImageFile(img, tif8, {SampleFormat::kUInt8, PixelEncoding::kSrgb});
   WriteImageFile(img, png16, {SampleFormat::kUInt16, PixelEncoding::kLinear});
   WriteImageFile(img, png8, {SampleFormat::kUInt8, PixelEncoding::kSrgb});
   Image grey_img(kSize, kSize, 1, 0.0f);
@@ -322,8 +340,8 @@ TEST_F(FrameDecoder, WholeDecodesOfPngAndJpegCropToTheRegionReadsBitForBit) {
   FrameDecodeOptions levels;  // a sensor response: black and white levels in codes
   levels.response = SensorResponse{4096.0, 52000.0};
   const std::array<std::array<int, 4>, 3> regions = {{{7, 13, 41, 35}, {0, 40, kSize, kSize - 40}, {50, 0, 14, 64}}};
-  for (const fs::path& path : {png16, png8, grey, rgba, jpg}) {
-    ASSERT_TRUE(DecodesWhole(path)) << path;
+  for (const fs::path& path : {png16, png8, grey, rgba, jpg, tif16, tif8}) {
+    ASSERT_TRUE(ReadFrameHeader(path).keep_whole) << path;
     for (const FrameDecodeOptions& options : {FrameDecodeOptions{}, levels}) {
       const CompactFrame whole = DecodeWholeFrame(path, options);
       ASSERT_EQ(whole.width, kSize);
@@ -345,13 +363,19 @@ TEST_F(FrameDecoder, WholeDecodesOfPngAndJpegCropToTheRegionReadsBitForBit) {
       EXPECT_GT(saturated, 0) << path;  // the flags are compared where there are some
     }
   }
-  // TIFF and EXR regions are read by rows: not whole decodes.
-  const fs::path tif = dir_.path() / "w.tif";
-  WriteImageFile(img, tif, {SampleFormat::kUInt16, PixelEncoding::kLinear});
-  EXPECT_FALSE(DecodesWhole(tif));
-  EXPECT_FALSE(DecodesWhole(dir_.path() / "w.exr"));
-  EXPECT_TRUE(DecodesWhole(dir_.path() / "w.dng"));
-  EXPECT_THROW(DecodeWholeFrame(tif), std::invalid_argument);
+  // Uncompressed and float files are read by rows where they lie: not kept whole.
+  const fs::path plain_tif = dir_.path() / "wu.tif", float_tif = dir_.path() / "wf.tif", exr = dir_.path() / "w.exr";
+  WriteUncompressedTiff(img, plain_tif);
+  WriteImageFile(img, float_tif, {SampleFormat::kFloat32, PixelEncoding::kLinear});
+  WriteImageFile(img, exr, {SampleFormat::kFloat32, PixelEncoding::kLinear});
+  ASSERT_EQ(OIIO::ImageInput::open(plain_tif.string())->spec().get_string_attribute("compression"), "none");
+  EXPECT_FALSE(ReadFrameHeader(plain_tif).keep_whole);
+  EXPECT_FALSE(ReadFrameHeader(float_tif).keep_whole);
+  EXPECT_FALSE(ReadFrameHeader(exr).keep_whole);
+  EXPECT_THROW(DecodeWholeFrame(exr), std::invalid_argument);
+  const fs::path dng = dir_.path() / "w.dng";
+  WriteDng(dng, MosaicFromLinearRgb(truth_, CfaPattern::kRggb, 0, 65535), kSize, kSize);
+  EXPECT_TRUE(ReadFrameHeader(dng).keep_whole);
   // A cut PNG is an InputError naming the file, as a region read of it is.
   Truncate(png16, 0.6);
   try {
