@@ -35,8 +35,9 @@
 namespace u3mscan {
 
 struct CaptureOptions {
-  // Upper bound of the cache of whole decodes (RAW, PNG, JPEG) used by LoadFrameRegion, bytes. 0
-  // disables the cache (each region read of such a frame decodes it again).
+  // Upper bound of the cache of frames kept whole (FrameHeader::keep_whole: RAW, PNG, JPEG,
+  // compressed TIFF) used by LoadFrameRegion, bytes. 0 disables the cache (each region read of
+  // such a frame decodes it again).
   std::size_t decode_cache_bytes = std::size_t{9} << 30;  // 9 GiB: 32 frames of 36 MP
   bool Check() const { return true; }
 };

@@ -506,7 +506,6 @@ bool IsRawPath(const fs::path& path) {
   return !(ext == ".tif" || ext == ".tiff" || ext == ".png" || ext == ".exr" || ext == ".jpg" || ext == ".jpeg");
 }
 
-
 FrameHeader ReadFrameHeader(const fs::path& path) {
   FrameHeader header;
   if (IsRawPath(path)) {
