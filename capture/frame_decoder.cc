@@ -311,6 +311,14 @@ void CheckJpegComplete(const fs::path& path) {
   }
 }
 
+// A read of rows or tiles that returned `ok`: InputError naming the file unless it is complete.
+// OIIO's TIFF reader reports a short strip as an error message but still returns true.
+void CheckRead(OIIO::ImageInput& in, const fs::path& path, bool ok) {
+  if (!ok || in.has_error()) {
+    throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in.geterror());
+  }
+}
+
 // How a value OIIO delivers as float (code / code_max for integer files) becomes linear data, and
 // whether it is at the white level. One rule for region reads and for the code tables of
 // CompactFrame (DecodeOiioCompact), so both give the same floats to the bit.
@@ -394,10 +402,7 @@ DecodedFrame DecodeOiioRegion(const fs::path& path, const FrameDecodeOptions& op
     } else {
       ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, OIIO::TypeDesc::FLOAT, buffer.data());
     }
-    // OIIO's TIFF reader reports a short strip as an error message but still returns true.
-    if (!ok || in->has_error()) {
-      throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
-    }
+    CheckRead(*in, path, ok);
     const int row_begin = std::max(band, y), row_end = std::min(band_end, y + h);
     ParallelFor(static_cast<std::size_t>(std::max(0, row_end - row_begin)), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
@@ -473,10 +478,7 @@ CompactFrame DecodeOiioCompact(const fs::path& path, const FrameDecodeOptions& o
       buffer16.resize(values);
       data = buffer16.data();
     }
-    const bool ok = in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, spec.format, data);
-    if (!ok || in->has_error()) {
-      throw InputError(path.string(), "", "complete image data (truncated or corrupt?): " + in->geterror());
-    }
+    CheckRead(*in, path, in->read_scanlines(0, 0, spec.y + band, spec.y + band_end, 0, 0, nch, spec.format, data));
     ParallelFor(static_cast<std::size_t>(band_end - band), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         const std::size_t row = static_cast<std::size_t>(band) + i;
