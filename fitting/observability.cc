@@ -58,7 +58,7 @@ std::string LeaveOutHint(FitParameter p, const ObservabilityContext& context) {
 
 bool ObservabilityOptions::Check() const {
   return max_std > 0.0 && effective_pixels >= 1 && uniform_abs_tolerance >= 0.0 && uniform_sigma_factor >= 0.0 &&
-         texture_full_contrast > 1.0 && default_rejection_chi2 >= 0.0;
+         default_rejection_chi2 >= 0.0;
 }
 
 double EffectiveChi2Increase(double cost_at_fit, double cost_at_default, const ObservabilityContext& context,
@@ -167,11 +167,10 @@ ObservabilityDecision DecideObservability(const Matrix7& fisher, const Parameter
   return out;
 }
 
-double TextureContrastKept(double map_std, double pooled_std_dev, const ObservabilityOptions& options) {
+bool IsUniformWithinNoise(double map_std, double pooled_std_dev, const ObservabilityOptions& options) {
   const double tolerance = std::max(options.uniform_abs_tolerance,
                                     std::isfinite(pooled_std_dev) ? options.uniform_sigma_factor * pooled_std_dev : 0.0);
-  if (!(map_std > tolerance)) return 0.0;
-  return std::min(1.0, (map_std / tolerance - 1.0) / (options.texture_full_contrast - 1.0));
+  return map_std <= tolerance;
 }
 
 }  // namespace u3mscan::fitting

@@ -35,13 +35,10 @@ struct ObservabilityOptions {
   double max_std = 0.05;
   // Pixels' worth of information at most (systematic-error floor, see above).
   int effective_pixels = 16;
-  // A measured map whose spread over the pixels is below the tolerance max(uniform_abs_tolerance,
-  // uniform_sigma_factor * its pooled uncertainty) is reported as a constant; a texture keeps all
-  // its contrast about the mean from texture_full_contrast tolerances up, and a share rising
-  // linearly from 0 in between (TextureContrastKept).
+  // A measured map whose spread over the pixels is below max(uniform_abs_tolerance,
+  // uniform_sigma_factor * its pooled uncertainty) is reported as a constant.
   double uniform_abs_tolerance = 0.01;
   double uniform_sigma_factor = 2.0;
-  double texture_full_contrast = 2.0;
   // A parameter the rule would leave out is kept after all when setting it to its U3M default
   // raises chi^2 (with the same effective-pixel scaling) by more than this: the data do not pin it
   // down, but they exclude the default (e.g. roughness of a mirror-like sample whose highlights all
@@ -99,14 +96,8 @@ ObservabilityDecision DecideObservability(
 double EffectiveChi2Increase(double cost_at_fit, double cost_at_default, const ObservabilityContext& context,
                              const ObservabilityOptions& options);
 
-// Share of a measured map's contrast about its mean that is written, for a map of standard
-// deviation `map_std` over its pixels whose values carry the pooled uncertainty `pooled_std_dev`:
-// 0 when the map is uniform within noise (map_std <= tolerance, see ObservabilityOptions; written
-// as a constant), 1 from texture_full_contrast tolerances up, and (map_std / tolerance - 1) /
-// (texture_full_contrast - 1) in between. Near the tolerance most of a map's contrast is noise (on
-// woven captures the clusters' values scatter about twice their posterior std on a uniform truth,
-// docs/fitting.md "Constant and shrunk maps"); the ramp keeps a map near the tolerance from
-// flipping between a constant and its whole noisy texture, and leaves a clear texture untouched.
-double TextureContrastKept(double map_std, double pooled_std_dev, const ObservabilityOptions& options);
+// True when a measured map of standard deviation `map_std` over its pixels is uniform within its
+// pooled uncertainty (see ObservabilityOptions).
+bool IsUniformWithinNoise(double map_std, double pooled_std_dev, const ObservabilityOptions& options);
 
 }  // namespace u3mscan::fitting

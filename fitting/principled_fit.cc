@@ -1774,25 +1774,14 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
     }
     // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
     const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
-    const double kept = TextureContrastKept(report.spread, pooled_std, options.observability);
-    auto out = result.parameter_maps[i].plane(0);
-    char buffer[200];
-    if (kept == 0.0) {
+    if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
+      char buffer[160];
       std::snprintf(buffer, sizeof buffer, "uniform within noise (spread %.3g, pooled uncertainty %.3g)", report.spread,
                     pooled_std);
       report.reason = buffer;
+      auto out = result.parameter_maps[i].plane(0);
       for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);
-    } else if (kept < 1.0) {
-      std::snprintf(buffer, sizeof buffer,
-                    "texture, %.0f %% of its contrast kept: the rest is within noise (spread %.3g, pooled uncertainty "
-                    "%.3g)",
-                    100.0 * kept, report.spread, pooled_std);
-      report.reason = buffer;
-      report.spread *= kept;
-      for (std::size_t j = 0; j < pixel_count; ++j) {
-        if (ids[j] >= 0.0f) out[j] = static_cast<float>(mean + kept * (out[j] - mean));
-      }
     }
   }
   FinishRotationMap(options, &result);
