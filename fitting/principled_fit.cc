@@ -1163,6 +1163,9 @@ void LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<s
                                   std::vector<ClusterFit>* clusters,
                                   const std::function<void(int, const ParameterMask&)>& refit) {
   const double max_std = options.observability.max_std;
+  // A cluster the model does not explain is left out whole further on (FitClusterModel): it
+  // neither counts in a pool nor is fitted again.
+  auto usable = [&](const ClusterFit& c) { return !(c.rms_relative_residual > options.unusable_relative_rms); };
   ParameterMask left_out{};  // so far; each round adds to it, so the rounds end
   for (;;) {
     ParameterMask now{};
@@ -1173,14 +1176,14 @@ void LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<s
       int worst = -1;
       for (const ClusterFit& c : *clusters) {
         const ParameterEstimate& e = c.parameters[i];
-        // A cluster the model does not explain is left out whole further on (FitClusterModel).
-        if (!e.measured || !std::isfinite(e.std_dev) || c.rms_relative_residual > options.unusable_relative_rms) continue;
+        if (!e.measured || !std::isfinite(e.std_dev) || !usable(c)) continue;
         const double w = static_cast<double>(cluster_weight[c.id]);
         variance += w * e.std_dev * e.std_dev;
         weight += w;
         if (worst < 0 || e.std_dev > (*clusters)[worst].parameters[i].std_dev) worst = c.id;
       }
-      if (!(weight > 0.0) || !(std::sqrt(variance / weight) > max_std)) continue;
+      const double pooled = weight > 0.0 ? std::sqrt(variance / weight) : 0.0;
+      if (!(pooled > max_std)) continue;
       now[i] = true;
       ObservabilityContext hint_context;
       hint_context.max_grazing_weight = -1.0;  // per cluster only
@@ -1188,7 +1191,7 @@ void LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<s
       std::snprintf(buffer, sizeof buffer,
                     "not constrained by this capture (posterior std pooled over the clusters %.3g > %.3g; worst "
                     "cluster %d: %.3g); ",
-                    std::sqrt(variance / weight), max_std, worst, (*clusters)[worst].parameters[i].std_dev);
+                    pooled, max_std, worst, (*clusters)[worst].parameters[i].std_dev);
       reason[i] = buffer + LeaveOutHint(static_cast<FitParameter>(i), hint_context);
     }
     if (now == ParameterMask{}) return;
@@ -1196,8 +1199,7 @@ void LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<s
     std::vector<ParameterMask> measured_now(clusters->size());  // what each cluster measured of `now`
     for (const ClusterFit& c : *clusters) {
       for (int i = 0; i < kFitParameterCount; ++i) measured_now[c.id][i] = now[i] && c.parameters[i].measured;
-      const bool usable = !(c.rms_relative_residual > options.unusable_relative_rms);  // else emptied later
-      if (usable && measured_now[c.id] != ParameterMask{}) again.push_back(c.id);
+      if (usable(c) && measured_now[c.id] != ParameterMask{}) again.push_back(c.id);
     }
     for (int i = 0; i < kFitParameterCount; ++i) left_out[i] = left_out[i] || now[i];
     ParallelFor(again.size(), [&](std::size_t begin, std::size_t end) {
