@@ -589,18 +589,25 @@ constexpr double kMismatchFlagRelativeRms = 0.05;
 // The hidden-lobe rule's bound: sqrt of GGX's alpha clamp (the fit's lower bound), 0.032.
 constexpr double kHiddenLobeRuleBound = 0.032;
 
+// A cluster fit with every parameter unmeasured at its U3M default (std inf), for the rules'
+// unit tests to set what they need.
+ClusterFit ClusterAtDefaults(int id) {
+  ClusterFit c;
+  c.id = id;
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    c.parameters[i].value = FitParameterDefault(static_cast<FitParameter>(i));
+    c.parameters[i].std_dev = std::numeric_limits<double>::infinity();
+  }
+  return c;
+}
+
 // Hidden lobe (docs/fitting.md): roughness at the lower bound while specular is held at its
 // default is a held lobe shrunk between the lights (twill / near: roughness 0 for 0.71), not a
 // measurement, unless the capture has saturated highlights (the mirror-like case, kept measured:
 // StiffMirrorLikeCaseConvergesOrFailsLoudlyWithoutNan runs the rule on such a capture).
 TEST(HiddenLobeRule, RoughnessAtTheLowerBoundWithSpecularHeldIsLeftOut) {
   auto cluster = [](int id, double roughness, bool specular_measured) {
-    ClusterFit c;
-    c.id = id;
-    for (int i = 0; i < kFitParameterCount; ++i) {
-      c.parameters[i].value = FitParameterDefault(static_cast<FitParameter>(i));
-      c.parameters[i].std_dev = std::numeric_limits<double>::infinity();
-    }
+    ClusterFit c = ClusterAtDefaults(id);
     ParameterEstimate& r = c.parameters[static_cast<int>(FitParameter::kRoughness)];
     r.value = roughness;
     r.std_dev = 0.03;
@@ -637,14 +644,9 @@ TEST(HiddenLobeRule, RoughnessAtTheLowerBoundWithSpecularHeldIsLeftOut) {
 // the clusters that measured it are fitted again with it at its default (denim on the near rig:
 // the values fitted beside a dropped specular re-rendered 44.5 % off, refitted 18.6 %).
 ClusterFit PooledRuleCluster(int id, double roughness_std, double specular_std) {
-  ClusterFit c;
-  c.id = id;
+  ClusterFit c = ClusterAtDefaults(id);
   c.rms_relative_residual = 0.01;
-  for (int i = 0; i < kFitParameterCount; ++i) {
-    c.parameters[i].value = FitParameterDefault(static_cast<FitParameter>(i));
-    c.parameters[i].std_dev = std::numeric_limits<double>::infinity();
-    c.parameters[i].reason = "own reason of cluster " + std::to_string(id);
-  }
+  for (ParameterEstimate& e : c.parameters) e.reason = "own reason of cluster " + std::to_string(id);
   auto set = [&](FitParameter p, double value, double std_dev) {
     ParameterEstimate& e = c.parameters[static_cast<int>(p)];
     e.value = value;
