@@ -1,4 +1,5 @@
 #include "fitting/principled_fit.h"
+#include "fitting/map_rules.h"
 
 #include <gtest/gtest.h>
 

@@ -1,0 +1,102 @@
+#include "fitting/map_rules.h"
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+#include "core/logging.h"
+#include "core/parallel.h"
+#include "fitting/observability.h"
+
+namespace u3mscan::fitting {
+namespace {
+// Roughness at or below sqrt(kMinAlpha) = 0.032, GGX's alpha clamp, is the fit's lower bound (the
+// lobe cannot get narrower).
+constexpr double kHiddenLobeRoughness = 0.032;
+constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
+constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
+}  // namespace
+
+std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector<ClusterFit>* clusters) {
+  std::vector<int> left_out;
+  if (capture_saturated) return left_out;
+  for (ClusterFit& c : *clusters) {
+    ParameterEstimate& roughness = c.parameters[kRoughness];
+    const ParameterEstimate& specular = c.parameters[kSpecular];
+    if (!roughness.measured || roughness.value > kHiddenLobeRoughness || specular.measured) continue;
+    char buffer[360];
+    std::snprintf(buffer, sizeof buffer,
+                  "the fit ended at the lower bound (roughness %.3g <= %.3g) with specular held at its default and no "
+                  "saturated highlight in the capture: a lobe that narrow falls between the lights, so the solve hid "
+                  "the held specular lobe instead of measuring a roughness",
+                  roughness.value, kHiddenLobeRoughness);
+    roughness.measured = false;
+    roughness.std_dev = std::numeric_limits<double>::infinity();
+    roughness.reason = buffer;
+    left_out.push_back(c.id);
+  }
+  return left_out;
+}
+
+void LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<std::size_t>& cluster_weight,
+                                  std::vector<ClusterFit>* clusters,
+                                  const std::function<void(int, const ParameterMask&)>& refit) {
+  const double max_std = options.observability.max_std;
+  // A cluster the model does not explain is left out whole further on (FitClusterModel): it
+  // neither counts in a pool nor is fitted again.
+  auto usable = [&](const ClusterFit& c) { return !(c.rms_relative_residual > options.unusable_relative_rms); };
+  ParameterMask left_out{};  // so far; each round adds to it, so the rounds end
+  for (;;) {
+    ParameterMask now{};
+    std::array<std::string, kFitParameterCount> reason;
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (left_out[i]) continue;
+      double variance = 0.0, weight = 0.0;
+      int worst = -1;
+      for (const ClusterFit& c : *clusters) {
+        const ParameterEstimate& e = c.parameters[i];
+        if (!e.measured || !std::isfinite(e.std_dev) || !usable(c)) continue;
+        const double w = static_cast<double>(cluster_weight[c.id]);
+        variance += w * e.std_dev * e.std_dev;
+        weight += w;
+        if (worst < 0 || e.std_dev > (*clusters)[worst].parameters[i].std_dev) worst = c.id;
+      }
+      const double pooled = weight > 0.0 ? std::sqrt(variance / weight) : 0.0;
+      if (!(pooled > max_std)) continue;
+      now[i] = true;
+      ObservabilityContext hint_context;
+      hint_context.max_grazing_weight = -1.0;  // per cluster only
+      char buffer[200];
+      std::snprintf(buffer, sizeof buffer,
+                    "not constrained by this capture (posterior std pooled over the clusters %.3g > %.3g; worst "
+                    "cluster %d: %.3g); ",
+                    pooled, max_std, worst, (*clusters)[worst].parameters[i].std_dev);
+      reason[i] = buffer + LeaveOutHint(static_cast<FitParameter>(i), hint_context);
+    }
+    if (now == ParameterMask{}) return;
+    std::vector<int> again;
+    std::vector<ParameterMask> measured_now(clusters->size());  // what each cluster measured of `now`
+    for (const ClusterFit& c : *clusters) {
+      for (int i = 0; i < kFitParameterCount; ++i) measured_now[c.id][i] = now[i] && c.parameters[i].measured;
+      if (usable(c) && measured_now[c.id] != ParameterMask{}) again.push_back(c.id);
+    }
+    for (int i = 0; i < kFitParameterCount; ++i) left_out[i] = left_out[i] || now[i];
+    ParallelFor(again.size(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t j = begin; j < end; ++j) refit(again[j], left_out);
+    });
+    for (ClusterFit& c : *clusters) {
+      for (int i = 0; i < kFitParameterCount; ++i) {
+        if (!now[i]) continue;
+        ParameterEstimate& e = c.parameters[i];
+        e.measured = false;  // whatever the refit says: the maps do not hold it
+        e.std_dev = std::numeric_limits<double>::infinity();
+        e.value = FitParameterDefault(static_cast<FitParameter>(i));
+        if (measured_now[c.id][i]) e.reason = reason[i];  // the others keep their own reason
+      }
+    }
+    LogInfo() << "fitting: " << again.size() << " clusters fitted again without the parameters the maps leave out";
+  }
+}
+
+}  // namespace u3mscan::fitting
