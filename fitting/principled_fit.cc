@@ -1,4 +1,5 @@
 #include "fitting/principled_fit.h"
+#include "fitting/grid_start.h"
 #include "fitting/map_rules.h"
 #include "fitting/tiled_fit.h"
 
@@ -61,12 +62,7 @@ double MismatchThreshold(const FitOptions& options) {
   return std::max(options.mismatch_relative_rms, 2.0 * options.noise_relative);
 }
 
-// Coarse start grid (roughness, specular, sheen). Roughness starts above sqrt(kMinAlpha) = 0.032,
-// where GGX's alpha clamp would zero its derivative.
-constexpr double kRoughnessGrid[] = {0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
-constexpr double kSpecularGrid[] = {0.0, 0.25, 0.5, 0.75, 1.0};
-constexpr double kSheenGrid[] = {0.0, 0.35, 0.7, 1.0};
-// The sheen grid is searched only when some observation has a Schlick weight above this.
+// The sheen grid (GridStart) is searched only when some observation has a Schlick weight above this.
 constexpr double kSheenGridMinGrazing = 0.01;
 // Pixels of the observation image sampled for its median luminance (the noise floor level).
 constexpr int kLevelSamples = 4096;
@@ -677,14 +673,15 @@ Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& 
 
 // The whole fit of one cluster: grid start, solve, anisotropy rotation (when `search_rotation`;
 // otherwise the samples' own), observability, refit. `candidates`: the parameters it may estimate
-// (Candidates(options), less any the maps as a whole leave out); the others stay at their
-// defaults. The samples may come back turned.
+// (Candidates(options), less any the maps as a whole leave out or hold); the others stay at their
+// value in `held` (DefaultParameters() but for what the maps hold) from the grid start on, so that
+// what the cluster fits belongs with them. The samples may come back turned.
 ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options, const ParameterMask& candidates,
-                      bool search_rotation, double* observability_s) {
+                      const ParameterVector& held, bool search_rotation, double* observability_s) {
   ClusterFit fit;
   fit.id = id;
   fit.sample_count = static_cast<int>(samples.pixels());
-  ParameterVector params = DefaultParameters();
+  ParameterVector params = held;
   if (samples.pixels() == 0) {
     fit.message = "no usable pixels";
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -699,25 +696,9 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   const bool sheen_grid = candidates[kSheen] && max_grazing > kSheenGridMinGrazing;
   std::vector<double> residuals;
   const std::size_t grid_pixels = static_cast<std::size_t>(options.grid_samples_per_cluster);
-  double best = std::numeric_limits<double>::infinity();
-  ParameterVector start = params;
-  start[kSpecularTint] = start[kSheenTint] = start[kAnisotropic] = start[kMetallic] = 0.0;
-  ParameterVector trial = start;
-  for (double r : kRoughnessGrid) {
-    for (double s : kSpecularGrid) {
-      for (double sh : kSheenGrid) {
-        if (!sheen_grid && sh != 0.0) continue;
-        trial[kRoughness] = r;
-        trial[kSpecular] = s;
-        trial[kSheen] = sh;
-        const double cost = SamplesCost(samples, grid_pixels, trial, options, residuals);
-        if (cost < best) {
-          best = cost;
-          start = trial;
-        }
-      }
-    }
-  }
+  const ParameterVector start = GridStart(candidates, held, sheen_grid, [&](const ParameterVector& trial) {
+    return SamplesCost(samples, grid_pixels, trial, options, residuals);
+  });
   params = start;
 
   // Start luminance of each sample's base colour, from the grid start.
@@ -766,10 +747,11 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
     *observability_s += Seconds(t_obs);
     return d;
   };
-  // Left-out parameters to their defaults and a refit without them; returns the solve's outcome.
+  // Left-out parameters to their defaults (held ones stay held) and a refit without them; returns
+  // the solve's outcome.
   auto refit_without_left_out = [&](ParameterVector& p, const ParameterMask& measured) {
     for (int i = 0; i < kFitParameterCount; ++i) {
-      if (!measured[i]) p[i] = FitParameterDefault(static_cast<FitParameter>(i));
+      if (!measured[i]) p[i] = candidates[i] ? FitParameterDefault(static_cast<FitParameter>(i)) : held[i];
     }
     const ParameterVector before = p;
     SolveOutcome o = SolveCluster(samples, measured, options, p);
@@ -1215,6 +1197,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   std::vector<ClusterSamples> samples(k);
   model.clusters.resize(k);
   const ParameterMask candidates_all = Candidates(options);
+  const ParameterVector defaults = DefaultParameters();
   std::vector<double> observability_s(k, 0.0);
   std::atomic<int> done{0};
   std::mutex progress_mutex;
@@ -1232,7 +1215,8 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         s.offsets.push_back(s.observations.size());
         s.luminance_start.push_back(0.2);
       }
-      model.clusters[c] = FitCluster(static_cast<int>(c), s, options, candidates_all, /*search_rotation=*/true, &observability_s[c]);
+      model.clusters[c] = FitCluster(static_cast<int>(c), s, options, candidates_all, defaults, /*search_rotation=*/true,
+                                     &observability_s[c]);
       std::size_t saturated = 0, seen = 0;  // over the sampled pixels' observations
       for (std::size_t j = 0; j < take; ++j) {
         const std::size_t index = m[j * m.size() / take];
@@ -1286,8 +1270,8 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         }
         s = std::move(refined);
         double pass_observability_s = 0.0;
-        model.clusters[c] = FitCluster(static_cast<int>(c), s, options, candidates_all, /*search_rotation=*/false,
-                                       &pass_observability_s);
+        model.clusters[c] = FitCluster(static_cast<int>(c), s, options, candidates_all, defaults,
+                                       /*search_rotation=*/false, &pass_observability_s);
         observability_s[c] += pass_observability_s;
         ++passes;
         change_deg = changed > 0 ? change_sum / changed : 0.0;
@@ -1314,7 +1298,8 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
     ParameterMask candidates = candidates_all;
     for (int i = 0; i < kFitParameterCount; ++i) candidates[i] = candidates[i] && !left_out[i];
     const ClusterFit before = model.clusters[c];
-    model.clusters[c] = FitCluster(c, samples[c], refit_options, candidates, /*search_rotation=*/false, &observability_s[c]);
+    model.clusters[c] = FitCluster(c, samples[c], refit_options, candidates, defaults, /*search_rotation=*/false,
+                                   &observability_s[c]);
     model.clusters[c].normal_passes = before.normal_passes;
     model.clusters[c].normal_change_deg = before.normal_change_deg;
     model.clusters[c].saturated_share = before.saturated_share;
