@@ -1150,6 +1150,15 @@ FitContext MakeContext(const Stack& stack, const SurfaceGeometry& geometry, cons
   }
   return context;
 }
+
+// The value a cluster's pixels take in the maps: its own where it measured the parameter or, in a
+// usable cluster, where the clusters hold one value of it (HoldUniformClusterMaps); the U3M default
+// elsewhere.
+double ValueInMaps(const ClusterModel& model, const ClusterFit& cluster, int parameter) {
+  const ParameterEstimate& e = cluster.parameters[parameter];
+  const bool held = !model.uniform_reason[parameter].empty() && Usable(model.options, cluster);
+  return e.measured || held ? e.value : FitParameterDefault(static_cast<FitParameter>(parameter));
+}
 }  // namespace
 
 ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
@@ -1292,18 +1301,30 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   // not written (denim, near rig, best: roughness error 0.177 -> 0.081, re-render 44.5 -> 18.6 %).
   std::vector<std::size_t> cluster_weight(k);
   for (int c = 0; c < k; ++c) cluster_weight[c] = members[c].size();
-  LeaveOutMapsNotKnownAsAWhole(options, cluster_weight, &model.clusters, [&](int c, const ParameterMask& left_out) {
+  // Cluster c fitted again on its samples with the parameters in `fixed` at their `values`.
+  auto refit = [&](int c, const ParameterMask& fixed, const ParameterVector& values) {
     FitOptions refit_options = options;
-    refit_options.metallic_if_demanded = options.metallic_if_demanded && !left_out[kMetallic];
+    refit_options.metallic_if_demanded = options.metallic_if_demanded && !fixed[kMetallic];
     ParameterMask candidates = candidates_all;
-    for (int i = 0; i < kFitParameterCount; ++i) candidates[i] = candidates[i] && !left_out[i];
+    for (int i = 0; i < kFitParameterCount; ++i) candidates[i] = candidates[i] && !fixed[i];
     const ClusterFit before = model.clusters[c];
-    model.clusters[c] = FitCluster(c, samples[c], refit_options, candidates, defaults, /*search_rotation=*/false,
+    model.clusters[c] = FitCluster(c, samples[c], refit_options, candidates, values, /*search_rotation=*/false,
                                    &observability_s[c]);
     model.clusters[c].normal_passes = before.normal_passes;
     model.clusters[c].normal_change_deg = before.normal_change_deg;
     model.clusters[c].saturated_share = before.saturated_share;
-  });
+  };
+  const ParameterMask left_out = LeaveOutMapsNotKnownAsAWhole(
+      options, cluster_weight, &model.clusters, [&](int c, const ParameterMask& fixed) { refit(c, fixed, defaults); });
+  // A map uniform within noise is written as one constant (docs/fitting.md): the clusters are
+  // fitted with it, as above, for the same reason (moving their values after the fit broke the
+  // joint fit: denim, near rig, balanced: re-render 18.6 -> 38.5 %).
+  model.uniform_reason = HoldUniformClusterMaps(
+      options, cluster_weight, &model.clusters, [&](int c, const ParameterMask& held, const ParameterVector& values) {
+        ParameterMask fixed = held;
+        for (int i = 0; i < kFitParameterCount; ++i) fixed[i] = fixed[i] || left_out[i];
+        refit(c, fixed, values);
+      });
   model.times.cluster_fit_s = Seconds(t);
   for (double s : observability_s) model.times.observability_s += s;
   for (const ClusterFit& c : model.clusters) {
@@ -1329,7 +1350,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   // above their posterior std (grazing rig: roughness 0.06 for 0.6 at a relative RMS residual of
   // 0.18-0.89). Left out with the reason; the cluster's pixels keep the defaults.
   for (ClusterFit& c : model.clusters) {
-    if (!(c.rms_relative_residual > options.unusable_relative_rms)) continue;
+    if (Usable(options, c)) continue;
     char buffer[220];
     std::snprintf(buffer, sizeof buffer,
                   "the Principled model does not explain this cluster's data (relative RMS residual %.3g > %.3g): "
@@ -1361,7 +1382,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
     ParameterMask measured{};
     for (int i = 0; i < kFitParameterCount; ++i) {
       const ParameterEstimate& e = f.parameters[i];
-      params[i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+      params[i] = ValueInMaps(model, f, i);
       measured[i] = e.measured;
     }
     f.highlight_share = HighlightShare(samples[c], params, measured, options);
@@ -1443,7 +1464,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   for (int c = 0; c < k; ++c) {
     for (int i = 0; i < kFitParameterCount; ++i) {
       const ParameterEstimate& e = model.clusters[c].parameters[i];
-      cluster_params[c][i] = e.measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+      cluster_params[c][i] = ValueInMaps(model, model.clusters[c], i);
       cluster_measured[c][i] = e.measured;
     }
     cluster_luminance[c] = std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color));
@@ -1683,7 +1704,9 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
       char buffer[160];
       std::snprintf(buffer, sizeof buffer, "uniform within noise (spread %.3g, pooled uncertainty %.3g)", report.spread,
                     pooled_std);
-      report.reason = buffer;
+      // Held uniform over the clusters, the pixels' spread is no longer the evidence: the
+      // clusters' was.
+      report.reason = model.uniform_reason[i].empty() ? buffer : model.uniform_reason[i];
       auto out = result.parameter_maps[i].plane(0);
       for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);
     }

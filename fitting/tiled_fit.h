@@ -9,7 +9,9 @@
 // FitPrincipled is exactly StartPixelMaps + FitPixelRows over the whole grid + FinishPixelMaps on a
 // model fitted on the same Stack, so a one-band run gives FitPrincipled's result.
 
+#include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/progress.h"
@@ -29,6 +31,8 @@ struct ClusterModel {
   ConvergenceReport convergence;          // cluster problems (pixel counts come later)
   StageTimes times;                       // gather, clustering, cluster fit
   std::array<bool, kFitParameterCount> measured_any{};  // maps that exist
+  // Per parameter, why its clusters hold one value (HoldUniformClusterMaps); "" where they do not.
+  std::array<std::string, kFitParameterCount> uniform_reason;
 };
 
 // Running sums of the per-pixel step over the bands (FinishPixelMaps turns them into the report).
