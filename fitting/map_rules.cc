@@ -117,6 +117,10 @@ std::array<std::string, kFitParameterCount> HoldUniformClusterMaps(
   // parameter only as fixed).
   std::vector<std::array<ParameterEstimate, kFitParameterCount>> own(clusters->size());
   std::vector<ParameterMask> holds(clusters->size());  // what each cluster holds of `held`
+  // A cluster's value in the maps: its own where it measured the parameter, else the default.
+  auto in_maps = [](const ParameterEstimate& e, int i) {
+    return e.measured && std::isfinite(e.std_dev) ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+  };
   for (;;) {
     ParameterMask now{};
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -127,13 +131,12 @@ std::array<std::string, kFitParameterCount> HoldUniformClusterMaps(
       for (const ClusterFit& c : *clusters) {
         if (!Usable(options, c)) continue;
         const ParameterEstimate& e = c.parameters[i];
-        const bool measured = e.measured && std::isfinite(e.std_dev);
-        const double value = measured ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+        const double value = in_maps(e, i);
         const double w = static_cast<double>(cluster_weight[c.id]);
         weight += w;
         sum += w * value;
         sum2 += w * value * value;
-        if (!measured) continue;
+        if (!e.measured || !std::isfinite(e.std_dev)) continue;
         measuring_weight += w;
         variance += w * e.std_dev * e.std_dev;
       }
@@ -164,9 +167,7 @@ std::array<std::string, kFitParameterCount> HoldUniformClusterMaps(
         const ParameterEstimate& e = c.parameters[i];
         holds[c.id][i] = true;
         own[c.id][i] = e;
-        const double in_maps = e.measured && std::isfinite(e.std_dev) ? e.value
-                                                                      : FitParameterDefault(static_cast<FitParameter>(i));
-        moves = moves || std::abs(in_maps - values[i]) > options.observability.uniform_abs_tolerance;
+        moves = moves || std::abs(in_maps(e, i) - values[i]) > options.observability.uniform_abs_tolerance;
       }
       if (moves) again.push_back(c.id);
     }
