@@ -117,9 +117,10 @@ std::array<std::string, kFitParameterCount> HoldUniformClusterMaps(
   // parameter only as fixed).
   std::vector<std::array<ParameterEstimate, kFitParameterCount>> own(clusters->size());
   std::vector<ParameterMask> holds(clusters->size());  // what each cluster holds of `held`
+  auto measured = [](const ParameterEstimate& e) { return e.measured && std::isfinite(e.std_dev); };
   // A cluster's value in the maps: its own where it measured the parameter, else the default.
-  auto in_maps = [](const ParameterEstimate& e, int i) {
-    return e.measured && std::isfinite(e.std_dev) ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
+  auto in_maps = [&](const ParameterEstimate& e, int i) {
+    return measured(e) ? e.value : FitParameterDefault(static_cast<FitParameter>(i));
   };
   for (;;) {
     ParameterMask now{};
@@ -136,7 +137,7 @@ std::array<std::string, kFitParameterCount> HoldUniformClusterMaps(
         weight += w;
         sum += w * value;
         sum2 += w * value * value;
-        if (!e.measured || !std::isfinite(e.std_dev)) continue;
+        if (!measured(e)) continue;
         measuring_weight += w;
         variance += w * e.std_dev * e.std_dev;
       }

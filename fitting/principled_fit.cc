@@ -693,7 +693,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   // Coarse grid start (tints, anisotropy, metallic at 0: the model is linear in C there).
   double max_grazing = 0.0;
   for (const LocalObservation& o : samples.observations) max_grazing = std::max(max_grazing, GrazingWeight(o));
-  const bool sheen_grid = candidates[kSheen] && max_grazing > kSheenGridMinGrazing;
+  const bool sheen_grid = max_grazing > kSheenGridMinGrazing;  // GridStart skips a sheen it does not fit
   std::vector<double> residuals;
   const std::size_t grid_pixels = static_cast<std::size_t>(options.grid_samples_per_cluster);
   const ParameterVector start = GridStart(candidates, held, sheen_grid, [&](const ParameterVector& trial) {
