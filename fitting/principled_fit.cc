@@ -1699,13 +1699,18 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
     }
     // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
     const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
-    if (IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
+    // A map of cluster values had its verdict before the per-pixel step (HoldUniformClusterMaps),
+    // and its clusters were fitted to it. Judged again here on the pixels, a map that verdict kept
+    // could be filled with its mean after all, replacing values fitted jointly with the others (the
+    // flip of plain at 3x, specular 0.024 / 0.073). Only the maps the pixels refine are judged here.
+    const bool uniform = RefinedPerPixel(options, p)
+                             ? IsUniformWithinNoise(report.spread, pooled_std, options.observability)
+                             : !model.uniform_reason[i].empty();
+    if (uniform) {
       report.constant = true;
       char buffer[160];
       std::snprintf(buffer, sizeof buffer, "uniform within noise (spread %.3g, pooled uncertainty %.3g)", report.spread,
                     pooled_std);
-      // Held uniform over the clusters, the pixels' spread is no longer the evidence: the
-      // clusters' was.
       report.reason = model.uniform_reason[i].empty() ? buffer : model.uniform_reason[i];
       auto out = result.parameter_maps[i].plane(0);
       for (std::size_t j = 0; j < pixel_count; ++j) out[j] = static_cast<float>(mean);

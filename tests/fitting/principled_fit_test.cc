@@ -1,5 +1,6 @@
 #include "fitting/principled_fit.h"
 #include "fitting/map_rules.h"
+#include "fitting/tiled_fit.h"
 
 #include <gtest/gtest.h>
 
@@ -857,6 +858,52 @@ TEST(UniformClusterMaps, ARefitThatMakesAnotherMapUniformHoldsItToo) {
     EXPECT_DOUBLE_EQ(c.parameters[specular].value, 0.5);
     EXPECT_DOUBLE_EQ(c.parameters[sheen].value, 0.4);
   }
+}
+
+// The maps' decisions after the per-pixel step (FinishPixelMaps): a map of cluster values keeps the
+// verdict HoldUniformClusterMaps gave it before the pixels; only a map the pixels refine is judged
+// on them. Judged again on the pixels, a specular map the early verdict kept (its clusters fitted to
+// their own values) was filled with its mean after the joint fit.
+TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
+  const int specular = static_cast<int>(FitParameter::kSpecular);
+  const int roughness = static_cast<int>(FitParameter::kRoughness);
+  const int sheen = static_cast<int>(FitParameter::kSheen);
+  ClusterModel model;  // per pixel: roughness is refined per pixel, specular and sheen are cluster values
+  model.clusters = {UniformRuleCluster(0, 0.50, 0.2), UniformRuleCluster(1, 0.52, 0.2)};
+  model.measured_any[specular] = model.measured_any[roughness] = model.measured_any[sheen] = true;
+  // Sheen was held uniform before the pixels (every cluster fitted with 0.2); specular was not.
+  model.uniform_reason[sheen] = "uniform within noise over the clusters (test)";
+  MetricGrid grid;
+  grid.width = 4;
+  grid.height = 2;
+  grid.pitch_mm = 0.1;
+  FitResult result = StartPixelMaps(model, grid);
+  PixelTally tally;
+  tally.cluster_pixels = {4, 4};
+  for (int row = 0; row < grid.height; ++row) {
+    for (int col = 0; col < grid.width; ++col) {
+      const int id = col < 2 ? 0 : 1;
+      result.cluster_id.at(0, row, col) = static_cast<float>(id);
+      result.parameter_maps[specular].at(0, row, col) = id == 0 ? 0.50f : 0.52f;
+      result.parameter_maps[roughness].at(0, row, col) = 0.8f;
+      result.parameter_maps[sheen].at(0, row, col) = 0.2f;
+    }
+  }
+  // Spread 0.01 against the clusters' std 0.04: uniform by the pixels' test, a texture by the
+  // clusters' verdict.
+  FinishPixelMaps(model, tally, &result);
+  const MapReport& spec = result.report(FitParameter::kSpecular);
+  EXPECT_TRUE(spec.measured);
+  EXPECT_FALSE(spec.constant) << spec.reason;
+  EXPECT_NEAR(spec.spread, 0.01, 1e-6);
+  EXPECT_FLOAT_EQ(result.parameter_maps[specular].at(0, 0, 0), 0.50f) << "the clusters' own values stay";
+  EXPECT_FLOAT_EQ(result.parameter_maps[specular].at(0, 1, 3), 0.52f);
+  const MapReport& held = result.report(FitParameter::kSheen);
+  EXPECT_TRUE(held.constant);
+  EXPECT_EQ(held.reason, model.uniform_reason[sheen]);
+  const MapReport& refined = result.report(FitParameter::kRoughness);
+  EXPECT_TRUE(refined.constant) << "refined per pixel: judged on the pixels, which agree";
+  EXPECT_NE(refined.reason.find("uniform within noise (spread"), std::string::npos) << refined.reason;
 }
 
 // A cluster the model explains grossly badly measures nothing (grazing rig in the stability suite:
