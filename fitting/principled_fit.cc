@@ -1700,13 +1700,12 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
     // Pooled uncertainty of a pixel's value: the cluster's, or the pixel's own where refined.
     const double pooled_std = n_pooled > 0 ? std::sqrt(std::max(0.0, pooled + variance_delta[i]) / n_pooled) : 0.0;
     // A map of cluster values had its verdict before the per-pixel step (HoldUniformClusterMaps),
-    // and its clusters were fitted to it. Judged again here on the pixels, a map that verdict kept
-    // could be filled with its mean after all, replacing values fitted jointly with the others (the
-    // flip of plain at 3x, specular 0.024 / 0.073). Only the maps the pixels refine are judged here.
-    const bool uniform = RefinedPerPixel(options, p)
-                             ? IsUniformWithinNoise(report.spread, pooled_std, options.observability)
-                             : !model.uniform_reason[i].empty();
-    if (uniform) {
+    // and its clusters were fitted to it. One that verdict kept as a texture stays one: judged on
+    // the pixels it could be filled with its mean after all, replacing values fitted jointly with
+    // the others (the flip of plain at 3x, specular 0.024 / 0.073). One it held is still judged
+    // here: the pixels of clusters the model does not explain hold the default, not the constant.
+    const bool judged_here = RefinedPerPixel(options, p) || !model.uniform_reason[i].empty();
+    if (judged_here && IsUniformWithinNoise(report.spread, pooled_std, options.observability)) {
       report.constant = true;
       char buffer[160];
       std::snprintf(buffer, sizeof buffer, "uniform within noise (spread %.3g, pooled uncertainty %.3g)", report.spread,

@@ -868,11 +868,16 @@ TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
   const int specular = static_cast<int>(FitParameter::kSpecular);
   const int roughness = static_cast<int>(FitParameter::kRoughness);
   const int sheen = static_cast<int>(FitParameter::kSheen);
+  const int tint = static_cast<int>(FitParameter::kSpecularTint);
   ClusterModel model;  // per pixel: roughness is refined per pixel, specular and sheen are cluster values
   model.clusters = {UniformRuleCluster(0, 0.50, 0.2), UniformRuleCluster(1, 0.52, 0.2)};
   model.measured_any[specular] = model.measured_any[roughness] = model.measured_any[sheen] = true;
   // Sheen was held uniform before the pixels (every cluster fitted with 0.2); specular was not.
+  // Specular tint was held too, at 0.3, but cluster 1 is one the model does not explain: its pixels
+  // keep the default 0.
   model.uniform_reason[sheen] = "uniform within noise over the clusters (test)";
+  model.uniform_reason[tint] = "uniform within noise over the clusters (test)";
+  model.measured_any[tint] = true;
   MetricGrid grid;
   grid.width = 4;
   grid.height = 2;
@@ -887,6 +892,7 @@ TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
       result.parameter_maps[specular].at(0, row, col) = id == 0 ? 0.50f : 0.52f;
       result.parameter_maps[roughness].at(0, row, col) = 0.8f;
       result.parameter_maps[sheen].at(0, row, col) = 0.2f;
+      result.parameter_maps[tint].at(0, row, col) = id == 0 ? 0.3f : 0.0f;
     }
   }
   // Spread 0.01 against the clusters' std 0.04: uniform by the pixels' test, a texture by the
@@ -901,6 +907,8 @@ TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
   const MapReport& held = result.report(FitParameter::kSheen);
   EXPECT_TRUE(held.constant);
   EXPECT_EQ(held.reason, model.uniform_reason[sheen]);
+  EXPECT_FALSE(result.report(FitParameter::kSpecularTint).constant)
+      << "held, but half its pixels hold the default: still a texture";
   const MapReport& refined = result.report(FitParameter::kRoughness);
   EXPECT_TRUE(refined.constant) << "refined per pixel: judged on the pixels, which agree";
   EXPECT_NE(refined.reason.find("uniform within noise (spread"), std::string::npos) << refined.reason;
