@@ -12,8 +12,11 @@ Capture Capture::Open(const fs::path& folder_or_manifest, const CaptureOptions& 
   Capture capture;
   std::error_code ec;
   capture.folder_ = fs::is_directory(folder_or_manifest, ec) ? folder_or_manifest : folder_or_manifest.parent_path();
-  capture.manifest_ = std::make_shared<const Manifest>(ReadManifest(folder_or_manifest));
+  std::vector<FrameHeader> headers;
+  capture.manifest_ = std::make_shared<const Manifest>(ReadManifest(folder_or_manifest, &headers));
   capture.options_ = options;
+  // ReadManifest has read every frame's header to check its size; keep what it says of reading.
+  for (const FrameHeader& h : headers) capture.cache_->keeps_whole.push_back(h.keep_whole ? 1 : 0);
   return capture;
 }
 
@@ -106,16 +109,8 @@ void Capture::Normalise(std::size_t index, const FrameLoadOptions& options, Deco
 }
 
 bool Capture::KeepsWhole(std::size_t index) const {
-  {
-    std::lock_guard<std::mutex> lock(cache_->mutex);
-    if (cache_->keeps_whole.size() != manifest_->frames.size()) cache_->keeps_whole.assign(manifest_->frames.size(), -1);
-    if (cache_->keeps_whole.at(index) >= 0) return cache_->keeps_whole[index] != 0;
-  }
-  // The header is read outside the lock; two threads may both read it and store the same answer.
-  const bool keep = ReadFrameHeader(FramePath(index)).keep_whole;
-  std::lock_guard<std::mutex> lock(cache_->mutex);
-  cache_->keeps_whole[index] = keep ? 1 : 0;
-  return keep;
+  frame(index);  // range check
+  return cache_->keeps_whole[index] != 0;  // set by Open, read-only after
 }
 
 std::shared_ptr<const CompactFrame> Capture::CachedWhole(std::size_t index) const {

@@ -95,7 +95,7 @@ class Capture {
   Capture() = default;
   void Normalise(std::size_t index, const FrameLoadOptions& options, DecodedFrame* frame) const;
   std::shared_ptr<const CompactFrame> CachedWhole(std::size_t index) const;
-  // FrameHeader::keep_whole of the frame's file, read on the first call and remembered.
+  // FrameHeader::keep_whole of the frame's file (read by Open).
   bool KeepsWhole(std::size_t index) const;
 
   std::shared_ptr<const Manifest> manifest_;
@@ -106,7 +106,7 @@ class Capture {
     std::mutex mutex;
     std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // latest first
     std::size_t bytes = 0;
-    std::vector<std::int8_t> keeps_whole;  // per frame: -1 not read yet, else FrameHeader::keep_whole
+    std::vector<std::int8_t> keeps_whole;  // per frame: FrameHeader::keep_whole (Open; not guarded by mutex)
   };
   std::shared_ptr<Cache> cache_ = std::make_shared<Cache>();
 };

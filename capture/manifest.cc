@@ -740,7 +740,7 @@ json ManifestToJson(const Manifest& m) {
   return j;
 }
 
-Manifest ReadManifest(const fs::path& capture_dir_or_file) {
+Manifest ReadManifest(const fs::path& capture_dir_or_file, std::vector<FrameHeader>* headers) {
   std::error_code ec;
   const bool is_dir = fs::is_directory(capture_dir_or_file, ec);
   const fs::path file = is_dir ? capture_dir_or_file / kManifestFileName : capture_dir_or_file;
@@ -752,6 +752,7 @@ Manifest ReadManifest(const fs::path& capture_dir_or_file) {
   Manifest m = ParseManifest(ReadText(file), name);
 
   const fs::path canonical_folder = fs::weakly_canonical(fs::absolute(folder), ec);
+  if (headers != nullptr) headers->clear();
   for (std::size_t i = 0; i < m.frames.size(); ++i) {
     const FrameSpec& f = m.frames[i];
     const std::string pointer = "/frames/" + std::to_string(i) + "/file";
@@ -778,6 +779,7 @@ Manifest ReadManifest(const fs::path& capture_dir_or_file) {
                            std::to_string(camera->height) + ", \"" + f.file + "\" is " + std::to_string(header.width) +
                            "x" + std::to_string(header.height));
     }
+    if (headers != nullptr) headers->push_back(header);
   }
   return m;
 }

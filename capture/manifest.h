@@ -149,11 +149,15 @@ struct Manifest {
 
 inline constexpr const char* kManifestFileName = "capture.json";
 
+struct FrameHeader;  // capture/frame_decoder.h
+
 // Parses and checks capture.json in `capture_dir` (or a capture.json path): everything
 // ParseManifest checks, plus frame files that exist inside the folder (no symlink escapes) and
 // frame headers whose size equals their camera's width x height (headers only, no decoding).
 // Throws InputError(capture.json path, JSON pointer, expectation) on the first violation.
-Manifest ReadManifest(const std::filesystem::path& capture_dir_or_file);
+// `headers` (optional): the header read of each frame, in the manifest's order, so that a reader
+// of the frames need not open them again to learn it (Capture::Open).
+Manifest ReadManifest(const std::filesystem::path& capture_dir_or_file, std::vector<FrameHeader>* headers = nullptr);
 // Parses and checks an in-memory JSON text; `source_name` (the file) is used in messages.
 // Checks types, ranges, ids, references, roles and targets; does not touch the file system.
 Manifest ParseManifest(const std::string& json_text, const std::string& source_name);
