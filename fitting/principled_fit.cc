@@ -1307,12 +1307,15 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
     refit_options.metallic_if_demanded = options.metallic_if_demanded && !fixed[kMetallic];
     ParameterMask candidates = candidates_all;
     for (int i = 0; i < kFitParameterCount; ++i) candidates[i] = candidates[i] && !fixed[i];
-    const ClusterFit before = model.clusters[c];
-    model.clusters[c] = FitCluster(c, samples[c], refit_options, candidates, values, /*search_rotation=*/false,
-                                   &observability_s[c]);
-    model.clusters[c].normal_passes = before.normal_passes;
-    model.clusters[c].normal_change_deg = before.normal_change_deg;
-    model.clusters[c].saturated_share = before.saturated_share;
+    // What the cluster fit learnt before the refit and FitCluster does not: its normal passes and
+    // the saturation of its samples.
+    ClusterFit& cluster = model.clusters[c];
+    const int passes = cluster.normal_passes;
+    const double change_deg = cluster.normal_change_deg, saturated_share = cluster.saturated_share;
+    cluster = FitCluster(c, samples[c], refit_options, candidates, values, /*search_rotation=*/false, &observability_s[c]);
+    cluster.normal_passes = passes;
+    cluster.normal_change_deg = change_deg;
+    cluster.saturated_share = saturated_share;
   };
   const ParameterMask left_out = LeaveOutMapsNotKnownAsAWhole(
       options, cluster_weight, &model.clusters, [&](int c, const ParameterMask& fixed) { refit(c, fixed, defaults); });
