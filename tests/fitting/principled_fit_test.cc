@@ -24,6 +24,7 @@ namespace {
 using testing::GrazingLights;
 using testing::MakeScene;
 using testing::OverheadLights;
+using testing::OverheadAndGrazingLights;
 using testing::RelativeRmse;
 using testing::Scene;
 using testing::SceneSpec;
@@ -224,8 +225,7 @@ TEST_F(PrincipledFitTest, OverheadRigRecoversEveryObservableLobeAndLeavesSheenOu
 
 TEST_F(PrincipledFitTest, ObliqueViewRecoversSheen) {
   SceneSpec spec;
-  spec.lights_deg = OverheadLights();
-  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.lights_deg = OverheadAndGrazingLights();
   spec.oblique_view = true;
   spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
   const Scene scene = MakeScene(spec);
@@ -400,8 +400,7 @@ TEST_F(PrincipledFitTest, BoundsAreRespectedOnDataBeyondTheModel) {
   // Extreme truth (specular 1, base colour near 1) plus 5 % multiplicative noise pushes the
   // unconstrained optimum past the bounds.
   SceneSpec spec;
-  spec.lights_deg = OverheadLights();
-  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.lights_deg = OverheadAndGrazingLights();
   spec.oblique_view = true;
   spec.material = [](int, int) {
     PrincipledParams<double> p;
@@ -559,8 +558,7 @@ TEST_F(PrincipledFitTest, MismatchedInputsAreRejected) {
 
 TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
   SceneSpec spec;
-  spec.lights_deg = OverheadLights();
-  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.lights_deg = OverheadAndGrazingLights();
   spec.oblique_view = true;
   spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
   const Scene scene = MakeScene(spec);
@@ -919,8 +917,7 @@ TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
 // threshold is lowered to the mismatch flag so that the Charlie-sheen scene crosses it.
 TEST_F(PrincipledFitTest, GrossMisfitClusterMeasuresNothing) {
   SceneSpec spec;
-  spec.lights_deg = OverheadLights();
-  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.lights_deg = OverheadAndGrazingLights();
   spec.oblique_view = true;
   spec.model = testing::RenderModel::kCharlieSheen;
   spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };
@@ -947,8 +944,7 @@ TEST_F(PrincipledFitTest, GrossMisfitClusterMeasuresNothing) {
 
 TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
   SceneSpec spec;
-  spec.lights_deg = OverheadLights();
-  for (const auto& l : GrazingLights()) spec.lights_deg.push_back(l);
+  spec.lights_deg = OverheadAndGrazingLights();
   spec.oblique_view = true;
   spec.model = testing::RenderModel::kCharlieSheen;
   spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, true); };

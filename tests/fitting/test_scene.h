@@ -72,6 +72,13 @@ inline std::vector<std::pair<double, double>> GrazingLights() {
   return {{10.0, 180.0}, {20.0, 160.0}, {20.0, 200.0}, {30.0, 180.0}};
 }
 
+// Both: with the oblique view, the rig that makes sheen measurable.
+inline std::vector<std::pair<double, double>> OverheadAndGrazingLights() {
+  std::vector<std::pair<double, double>> out = OverheadLights();
+  for (const auto& l : GrazingLights()) out.push_back(l);
+  return out;
+}
+
 struct Scene {
   Stack stack;
   SurfaceGeometry geometry;
