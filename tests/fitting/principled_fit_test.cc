@@ -858,10 +858,10 @@ TEST(UniformClusterMaps, ARefitThatMakesAnotherMapUniformHoldsItToo) {
   }
 }
 
-// The maps' decisions after the per-pixel step (FinishPixelMaps): a map of cluster values keeps the
-// verdict HoldUniformClusterMaps gave it before the pixels; only a map the pixels refine is judged
-// on them. Judged again on the pixels, a specular map the early verdict kept (its clusters fitted to
-// their own values) was filled with its mean after the joint fit.
+// The maps' decisions after the per-pixel step (FinishPixelMaps): a map of cluster values that
+// HoldUniformClusterMaps kept as a texture stays one (judged again on the pixels, a specular map
+// whose clusters were fitted to their own values was filled with its mean after the joint fit); a
+// map it held, and a map the pixels refine, are judged on the pixels.
 TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
   const int specular = static_cast<int>(FitParameter::kSpecular);
   const int roughness = static_cast<int>(FitParameter::kRoughness);
@@ -871,8 +871,8 @@ TEST(UniformClusterMaps, TheMapsDecisionAfterThePixelsKeepsTheClustersVerdict) {
   model.clusters = {UniformRuleCluster(0, 0.50, 0.2), UniformRuleCluster(1, 0.52, 0.2)};
   model.measured_any[specular] = model.measured_any[roughness] = model.measured_any[sheen] = true;
   // Sheen was held uniform before the pixels (every cluster fitted with 0.2); specular was not.
-  // Specular tint was held too, at 0.3, but cluster 1 is one the model does not explain: its pixels
-  // keep the default 0.
+  // Specular tint was held too, at 0.3, but cluster 1's pixels hold the default 0, as those of a
+  // cluster the model does not explain do (Usable): the held map is then no constant.
   model.uniform_reason[sheen] = "uniform within noise over the clusters (test)";
   model.uniform_reason[tint] = "uniform within noise over the clusters (test)";
   model.measured_any[tint] = true;
