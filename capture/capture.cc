@@ -16,7 +16,7 @@ Capture Capture::Open(const fs::path& folder_or_manifest, const CaptureOptions& 
   capture.manifest_ = std::make_shared<const Manifest>(ReadManifest(folder_or_manifest, &headers));
   capture.options_ = options;
   // ReadManifest has read every frame's header to check its size; keep what it says of reading.
-  for (const FrameHeader& h : headers) capture.cache_->keeps_whole.push_back(h.keep_whole ? 1 : 0);
+  for (const FrameHeader& h : headers) capture.keeps_whole_.push_back(h.keep_whole);
   return capture;
 }
 
@@ -110,7 +110,7 @@ void Capture::Normalise(std::size_t index, const FrameLoadOptions& options, Deco
 
 bool Capture::KeepsWhole(std::size_t index) const {
   frame(index);  // range check
-  return cache_->keeps_whole[index] != 0;  // set by Open, read-only after
+  return keeps_whole_[index];
 }
 
 std::shared_ptr<const CompactFrame> Capture::CachedWhole(std::size_t index) const {

@@ -99,6 +99,7 @@ class Capture {
   bool KeepsWhole(std::size_t index) const;
 
   std::shared_ptr<const Manifest> manifest_;
+  std::vector<bool> keeps_whole_;  // per frame, in the manifest's order: FrameHeader::keep_whole (Open)
   std::filesystem::path folder_;
   CaptureOptions options_;
 
@@ -106,7 +107,6 @@ class Capture {
     std::mutex mutex;
     std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // latest first
     std::size_t bytes = 0;
-    std::vector<std::int8_t> keeps_whole;  // per frame: FrameHeader::keep_whole (Open; not guarded by mutex)
   };
   std::shared_ptr<Cache> cache_ = std::make_shared<Cache>();
 };

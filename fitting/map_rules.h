@@ -35,9 +35,8 @@ std::vector<int> LeaveOutHiddenLobeRoughness(bool capture_saturated, std::vector
 // pooled stds of what is left pass. Clusters are indexed by their id; `refit` runs in parallel.
 // Returns the parameters it left out.
 ParameterMask LeaveOutMapsNotKnownAsAWhole(const FitOptions& options, const std::vector<std::size_t>& cluster_weight,
-                                  std::vector<ClusterFit>* clusters,
-                                  const std::function<void(int id, const ParameterMask& left_out)>& refit);
-
+                                           std::vector<ClusterFit>* clusters,
+                                           const std::function<void(int id, const ParameterMask& left_out)>& refit);
 
 // True when the per-pixel step refines `parameter` (FitMode::kPerPixel: roughness, and specular
 // with refine_specular_per_pixel): its map is then more than its clusters' values.
