@@ -59,7 +59,7 @@ struct FitOptions {
   // balanced preset (docs/fitting.md, "Robust loss"): plain roughness error 0.039 -> 0.026 and
   // specular 0.134 -> 0.102, twill roughness 0.077 -> 0.043, knit 0.110 -> 0.063. A cluster
   // solve that stalls is run again from a Huber solve, and the observability's information goes
-  // through Huber (principled_fit.cc, SolveCluster and FisherInformation).
+  // through Huber (cluster_fit.cc, SolveCluster and FisherInformation).
   RobustLoss robust_loss{RobustLossKind::kCauchy, 2.0};
   // Observations with cos_l or cos_v below this are not used (grazing to the point of shadowing).
   double min_cos = 0.02;
