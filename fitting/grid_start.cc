@@ -14,7 +14,7 @@ constexpr double kNoSheen[] = {0.0};
 }  // namespace
 
 ParameterVector GridStart(const ParameterMask& candidates, const ParameterVector& held, bool search_sheen,
-                          const std::function<double(const ParameterVector&)>& cost) {
+                          const std::function<double(const ParameterVector&)>& cost, double min_roughness) {
   constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
   constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
   constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
@@ -29,6 +29,7 @@ ParameterVector GridStart(const ParameterMask& candidates, const ParameterVector
   double best = std::numeric_limits<double>::infinity();
   ParameterVector trial = start;
   for (double r : grid(kRoughness, kRoughnessGrid)) {
+    if (candidates[kRoughness] && r < min_roughness) continue;
     for (double s : grid(kSpecular, kSpecularGrid)) {
       for (double sh : grid(kSheen, search_sheen ? std::span<const double>(kSheenGrid) : kNoSheen)) {
         trial[kRoughness] = r;

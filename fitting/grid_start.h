@@ -12,8 +12,9 @@ namespace u3mscan::fitting {
 // The grid point of least `cost`. A parameter outside `candidates` takes no grid: it stays at its
 // value in `held` at every point (a refit with a parameter held by the maps must fit the others
 // with it, from the start on). Sheen is searched only when `search_sheen` (the capture has grazing
-// observations); otherwise a candidate sheen starts at 0.
+// observations); otherwise a candidate sheen starts at 0. Roughness grid points below
+// `min_roughness` are skipped.
 ParameterVector GridStart(const ParameterMask& candidates, const ParameterVector& held, bool search_sheen,
-                          const std::function<double(const ParameterVector&)>& cost);
+                          const std::function<double(const ParameterVector&)>& cost, double min_roughness = 0.0);
 
 }  // namespace u3mscan::fitting

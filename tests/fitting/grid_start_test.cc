@@ -53,5 +53,30 @@ TEST(GridStart, AHeldParameterKeepsItsValueAndTheOthersFitIt) {
   EXPECT_DOUBLE_EQ(start[kRoughness], 0.4);
 }
 
+// The broad start of a refit whose roughness hid a held lobe in a spike (cluster_fit.cc): roughness
+// grid points below `min_roughness` are not tried; a held roughness keeps its value whatever it is.
+TEST(GridStart, AMinimumRoughnessSkipsTheGridPointsBelowIt) {
+  ParameterMask candidates{};
+  candidates[kRoughness] = candidates[kSheen] = true;
+  ParameterVector held = DefaultParameters();
+  held[kSpecular] = 0.5;
+  int evaluations = 0;
+  const ParameterVector start = GridStart(
+      candidates, held, /*search_sheen=*/true,
+      [&](const ParameterVector& p) {
+        ++evaluations;
+        EXPECT_GE(p[kRoughness], 0.5);
+        return ValleyCost(p);
+      },
+      /*min_roughness=*/0.5);
+  EXPECT_EQ(evaluations, 5 * 4) << "roughness 0.5, 0.6, 0.7, 0.85, 1 x the sheen grid";
+  // The best of those: 0.5 (peak 0.5 / 0.25 = 2 against 0.25 / 0.09), not the grid's 0.4.
+  EXPECT_DOUBLE_EQ(start[kRoughness], 0.5);
+  candidates[kRoughness] = false;
+  held[kRoughness] = 0.1;
+  const ParameterVector held_roughness = GridStart(candidates, held, /*search_sheen=*/true, ValleyCost, 0.5);
+  EXPECT_DOUBLE_EQ(held_roughness[kRoughness], 0.1);
+}
+
 }  // namespace
 }  // namespace u3mscan::fitting
