@@ -35,10 +35,9 @@ constexpr double kFinalStdFactor = 2.0;
 // start of that test's refit (the twill preset's 0.2, well inside the bounds).
 constexpr double kAnisotropyAtBound = 0.01;
 constexpr double kAnisotropyProbeStart = 0.2;
-// A solve with specular held that ends with roughness below kSpikeRoughness (the start grid's
-// smallest, 0.05) may have hidden the held lobe in a spike between the lights; it is solved again
-// from the best grid start at roughness >= kBroadStartRoughness (FitCluster).
-constexpr double kSpikeRoughness = 0.05;
+// A solve with specular held that ends with roughness below the grid's smallest
+// (kSmallestStartRoughness) may have hidden the held lobe in a spike between the lights; it is
+// solved again from the best grid start at roughness >= kBroadStartRoughness (FitCluster).
 constexpr double kBroadStartRoughness = 0.2;
 // Anisotropy rotation search (FitOptions::fit_anisotropy_rotation): the cost is scanned (no solve)
 // every kRotationScanStepDeg over the half turn (the stretch repeats every 180 degrees) with the
@@ -353,9 +352,11 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   const bool sheen_grid = max_grazing > kSheenGridMinGrazing;  // GridStart skips a sheen it does not fit
   std::vector<double> residuals;
   const std::size_t grid_pixels = static_cast<std::size_t>(options.grid_samples_per_cluster);
-  const ParameterVector start = GridStart(candidates, held, sheen_grid, [&](const ParameterVector& trial) {
+  // The start grid's cost: over grid_samples_per_cluster samples, evenly spread (SamplesCost).
+  auto grid_cost = [&](const ParameterVector& trial) {
     return SamplesCost(samples, grid_pixels, trial, options, residuals);
-  });
+  };
+  const ParameterVector start = GridStart(candidates, held, sheen_grid, grid_cost);
   params = start;
 
   // Start luminance of each sample's base colour, from the grid start.
@@ -449,20 +450,17 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   // a rule over the clusters) can end with roughness near its lower bound: a spike between the
   // lights that hides a held lobe the data do not show, since the robust loss lets the few
   // observations the spike hits go (denim, near rig, best preset: relative RMS 4.30 and 1.32, both
-  // clusters then unusable). Below kSpikeRoughness the cluster is solved again from the best grid
+  // clusters then unusable). Below kSmallestStartRoughness the cluster is solved again from the best grid
   // start at roughness >= kBroadStartRoughness, and that solution is taken when it ends at or above
-  // kSpikeRoughness and explains the data better (the relative RMS residual that Usable judges).
+  // kSmallestStartRoughness and explains the data better (the relative RMS residual that Usable judges).
   // Not after this fit's own refit without a left-out specular: there it moved a woven cluster's
   // passes to a lobe-less fit at the roughness bound (twill, distant, balanced: roughness error
   // 0.108 -> 0.171; docs/fitting.md).
-  if (!candidates[kSpecular] && candidates[kRoughness] && outcome.usable && params[kRoughness] < kSpikeRoughness) {
-    ParameterVector broad = GridStart(
-        candidates, held, sheen_grid,
-        [&](const ParameterVector& trial) { return SamplesCost(samples, grid_pixels, trial, options, residuals); },
-        kBroadStartRoughness);
+  if (!candidates[kSpecular] && candidates[kRoughness] && outcome.usable && params[kRoughness] < kSmallestStartRoughness) {
+    ParameterVector broad = GridStart(candidates, held, sheen_grid, grid_cost, kBroadStartRoughness);
     const SolveOutcome broad_outcome = SolveCluster(samples, candidates, options, broad);
     const int iterations = outcome.iterations + broad_outcome.iterations;
-    if (broad_outcome.usable && broad[kRoughness] >= kSpikeRoughness &&
+    if (broad_outcome.usable && broad[kRoughness] >= kSmallestStartRoughness &&
         summarise(broad, candidates, nullptr) < summarise(params, candidates, nullptr)) {
       LogInfo() << "fitting: cluster " << id << ": roughness " << params[kRoughness] << " hid the held specular "
                 << params[kSpecular] << "; " << broad[kRoughness] << " from a broad start explains the data better";

@@ -5,9 +5,7 @@
 
 namespace u3mscan::fitting {
 namespace {
-// Roughness starts above sqrt(kMinAlpha) = 0.032, where GGX's alpha clamp would zero its
-// derivative.
-constexpr double kRoughnessGrid[] = {0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
+constexpr double kRoughnessGrid[] = {kSmallestStartRoughness, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.85, 1.0};
 constexpr double kSpecularGrid[] = {0.0, 0.25, 0.5, 0.75, 1.0};
 constexpr double kSheenGrid[] = {0.0, 0.35, 0.7, 1.0};
 constexpr double kNoSheen[] = {0.0};

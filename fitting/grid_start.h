@@ -9,6 +9,10 @@
 
 namespace u3mscan::fitting {
 
+// The grid's smallest roughness, above sqrt(kMinAlpha) = 0.032 where GGX's alpha clamp would zero
+// its derivative. A solve that ends below it went past every start toward the bound.
+inline constexpr double kSmallestStartRoughness = 0.05;
+
 // The grid point of least `cost`. A parameter outside `candidates` takes no grid: it stays at its
 // value in `held` at every point (a refit with a parameter held by the maps must fit the others
 // with it, from the start on). Sheen is searched only when `search_sheen` (the capture has grazing

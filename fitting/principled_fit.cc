@@ -647,7 +647,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
           const std::size_t index = m[j * m.size() / take];
           if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
           const PixelCostSettings settings =
-              CostSettingsFor(options, params, free, std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color)));
+              CostSettingsFor(options, params, free, Luminance(model.clusters[c].mean_base_color));
           int count = 0;
           const Eigen::Vector3d n = RefineNormal(context, index, params, rotation_deg, settings,
                                                  options.normal_iterations, buffer.data(), scratch, &count);

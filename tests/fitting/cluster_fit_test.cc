@@ -5,6 +5,7 @@
 #include <cmath>
 #include <vector>
 
+#include "fitting/grid_start.h"
 #include "fitting/shading_frame.h"
 #include "test_scene.h"
 
@@ -17,9 +18,6 @@ using testing::SceneSpec;
 
 constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
 constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
-// The start grid's smallest roughness (grid_start.cc): a solve that ends below it went past every
-// start toward the bound.
-constexpr double kGridSmallestRoughness = 0.05;
 // Noise-free render, true normals: the fit recovers the truth to this (roughness units; relative
 // RMS residual).
 constexpr double kRecoveryTolerance = 0.005;
@@ -98,7 +96,7 @@ ClusterFit FitWithSpecularHeld(const Scene& scene, double held_specular) {
 TEST(ClusterFit, AHeldSpecularTheDataDoNotShowIsNotHiddenInASpike) {
   const ClusterFit fit = FitWithSpecularHeld(DarkFabric(0.22, 0.0), 0.5);
   const ParameterEstimate& roughness = fit.parameters[kRoughness];
-  EXPECT_GE(roughness.value, kGridSmallestRoughness) << "a spike below every grid start";
+  EXPECT_GE(roughness.value, kSmallestStartRoughness) << "a spike below every grid start";
   EXPECT_TRUE(roughness.measured) << roughness.reason;
   EXPECT_LT(fit.rms_relative_residual, FitOptions{}.unusable_relative_rms);
   EXPECT_FALSE(fit.parameters[kSpecular].measured);
