@@ -45,6 +45,14 @@ enum class FitParameter : int {
   kMetallic,
 };
 inline constexpr int kFitParameterCount = 7;
+// Each parameter's position in a ParameterVector, a ParameterMask and ClusterFit::parameters.
+inline constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
+inline constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
+inline constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
+inline constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
+inline constexpr int kSheenTint = static_cast<int>(FitParameter::kSheenTint);
+inline constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
+inline constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 
 using ParameterVector = std::array<double, kFitParameterCount>;
 using ParameterMask = std::array<bool, kFitParameterCount>;

@@ -21,13 +21,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using Matrix7 = Eigen::Matrix<double, kFitParameterCount, kFitParameterCount>;
 
-constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
-constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
-constexpr int kSheenTint = static_cast<int>(FitParameter::kSheenTint);
-constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
-constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
-constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 // A measured parameter whose posterior std at the final cluster solution exceeds this many max_std
 // is left out after all (end of the cluster fit).
 constexpr double kFinalStdFactor = 2.0;

@@ -13,9 +13,6 @@ constexpr double kNoSheen[] = {0.0};
 
 ParameterVector GridStart(const ParameterMask& candidates, const ParameterVector& held, bool search_sheen,
                           const std::function<double(const ParameterVector&)>& cost, double min_roughness) {
-  constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-  constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
-  constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
   ParameterVector start = held;
   for (FitParameter p : {FitParameter::kSpecularTint, FitParameter::kSheenTint, FitParameter::kAnisotropic,
                          FitParameter::kMetallic}) {

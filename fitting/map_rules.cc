@@ -15,8 +15,6 @@ namespace {
 // Roughness at or below sqrt(kMinAlpha) = 0.032, GGX's alpha clamp, is the fit's lower bound (the
 // lobe cannot get narrower).
 constexpr double kHiddenLobeRoughness = 0.032;
-constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
 }  // namespace
 
 bool Usable(const FitOptions& options, const ClusterFit& cluster) {

@@ -27,13 +27,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
-constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
-constexpr int kSheenTint = static_cast<int>(FitParameter::kSheenTint);
-constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
-constexpr int kAnisotropic = static_cast<int>(FitParameter::kAnisotropic);
-constexpr int kMetallic = static_cast<int>(FitParameter::kMetallic);
 // Pixels of the observation image sampled for its median luminance (the noise floor level).
 constexpr int kLevelSamples = 4096;
 // Smallest sigma of an observation channel, relative to its level: keeps weights finite when the

@@ -16,8 +16,6 @@ using testing::MakeScene;
 using testing::Scene;
 using testing::SceneSpec;
 
-constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
 // Noise-free render, true normals: the fit recovers the truth to this (roughness units; relative
 // RMS residual).
 constexpr double kRecoveryTolerance = 0.005;

@@ -7,11 +7,6 @@
 namespace u3mscan::fitting {
 namespace {
 
-constexpr int kRoughness = static_cast<int>(FitParameter::kRoughness);
-constexpr int kSpecular = static_cast<int>(FitParameter::kSpecular);
-constexpr int kSheen = static_cast<int>(FitParameter::kSheen);
-constexpr int kSpecularTint = static_cast<int>(FitParameter::kSpecularTint);
-
 // A cost whose minimum (roughness 0.3, specular 0.25, sheen 0.7) lies on the grid, with a valley
 // that trades roughness against specular: with specular held elsewhere, the best roughness moves.
 double ValleyCost(const ParameterVector& p) {
