@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/principled_brdf.h"
+#include "datasets_synthetic/renderer.h"
 #include "fitting/shading_frame.h"
 #include "reconstruction/relief_levelling.h"
 #include "u3m/image_io.h"
@@ -269,10 +270,34 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
     for (int p = 0; p < kParameterCount; ++p) *fields[p] = truth.parameters[p].empty() ? kU3mDefaults[p] : TapMean(truth.parameters[p], 0, taps);
     return true;
   };
+  // Radiance f(L, V) cos_l for a unit light from world direction l, the view straight above, in the
+  // shading frame (t, b, n). `render` is a Principled material's (the fit, and the truth's own maps
+  // as a material); `render_truth` is the fabric's: the model its scene was rendered with
+  // (truth.json /reflectance_model). Under model mismatch (the synthetic scanner's Charlie sheen,
+  // datasets_synthetic/renderer.h, evaluated in float as the renderer does) the re-render then
+  // compares the material with what the fabric looks like, not with a Principled rendering of the
+  // truth's parameters.
   auto render = [&](const PrincipledParams<double>& params, const Eigen::Vector3d& n, const Eigen::Vector3d& t,
                     const Eigen::Vector3d& b, const Eigen::Vector3d& l) -> Eigen::Vector3d {
     const Eigen::Vector3d ll(l.dot(t), l.dot(b), l.dot(n)), vl(view_in_world.dot(t), view_in_world.dot(b), view_in_world.dot(n));
     return EvaluatePrincipled(params, ll, vl) * std::max(0.0, ll.z());
+  };
+  const bool truth_is_principled = truth.model == synthetic::ReflectanceModel::kPrincipled;
+  auto render_truth = [&](const PrincipledParams<double>& params, const Eigen::Vector3d& n, const Eigen::Vector3d& t,
+                          const Eigen::Vector3d& b, const Eigen::Vector3d& l) -> Eigen::Vector3d {
+    if (truth_is_principled) return render(params, n, t, b, l);
+    const Eigen::Vector3d ll(l.dot(t), l.dot(b), l.dot(n)), vl(view_in_world.dot(t), view_in_world.dot(b), view_in_world.dot(n));
+    PrincipledParams<float> p;
+    p.base_color = params.base_color.cast<float>();
+    p.roughness = static_cast<float>(params.roughness);
+    p.specular = static_cast<float>(params.specular);
+    p.specular_tint = static_cast<float>(params.specular_tint);
+    p.sheen = static_cast<float>(params.sheen);
+    p.sheen_tint = static_cast<float>(params.sheen_tint);
+    p.anisotropic = static_cast<float>(params.anisotropic);
+    p.metallic = static_cast<float>(params.metallic);
+    const Vec3<float> f = synthetic::EvaluateModel(truth.model, p, ll.cast<float>(), vl.cast<float>());
+    return f.cast<double>() * std::max(0.0, ll.z());
   };
 
   // The run's levelling: the truth's height is then kept on the output grid (4 bytes a pixel) and
@@ -363,7 +388,9 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
         // coarser pixel would hold).
         bool truth_finite = true;
         if (!footprint.averages_footprints()) {
-          for (std::size_t k = 0; k < lights.size(); ++k) truth_radiance[k] = render(tp.params, nt, tp.tangent, tp.bitangent, lights[k]);
+          for (std::size_t k = 0; k < lights.size(); ++k) {
+            truth_radiance[k] = render_truth(tp.params, nt, tp.tangent, tp.bitangent, lights[k]);
+          }
         } else {
           for (auto& r : truth_radiance) r.setZero();
           for (const TruthTap& tap : taps) {
@@ -374,7 +401,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
               break;
             }
             for (std::size_t k = 0; k < lights.size(); ++k) {
-              truth_radiance[k] += tap.weight * render(at_tap.params, at_tap.normal, at_tap.tangent, at_tap.bitangent, lights[k]);
+              truth_radiance[k] += tap.weight * render_truth(at_tap.params, at_tap.normal, at_tap.tangent, at_tap.bitangent, lights[k]);
             }
           }
         }
@@ -388,8 +415,11 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
           if (!re.allFinite() || !rt.allFinite()) continue;
           num += (re - rt).squaredNorm();
           den += rt.squaredNorm();
-          // The truth's own maps on this grid, rendered as one pixel (Evaluation::rerender_truth_maps_relative_rmse).
-          const Eigen::Vector3d rm = footprint.averages_footprints() ? render(tp.params, nt, tp.tangent, tp.bitangent, lights[k]) : rt;
+          // The truth's own maps on this grid as a Principled material, rendered as one pixel
+          // (Evaluation::rerender_truth_maps_relative_rmse); that is rt itself on a grid no coarser
+          // than a Principled truth's.
+          const bool maps_render_as_truth = !footprint.averages_footprints() && truth_is_principled;
+          const Eigen::Vector3d rm = maps_render_as_truth ? rt : render(tp.params, nt, tp.tangent, tp.bitangent, lights[k]);
           if (rm.allFinite()) truth_maps_num += (rm - rt).squaredNorm();
         }
         sums.render_num += num;

@@ -66,16 +66,20 @@ struct Evaluation {
   double height_levelled_rmse_percent = std::numeric_limits<double>::quiet_NaN();
   std::vector<ParameterError> parameters;  // fitting::FitParameter order
   // Re-render error under held-out lights: sqrt(sum (fit - truth)^2 / sum truth^2) over compared
-  // pixels, RGB and lights, both rendered with core/principled_brdf.h (no cast shadows), view
-  // straight above; the truth in the scene's fibre frame, the fit in the fitter's (+x projected).
+  // pixels, RGB and lights (no cast shadows), view straight above; the fit rendered with
+  // core/principled_brdf.h in the fitter's frame (+x projected), the truth with the model its scene
+  // was rendered with (truth.json /reflectance_model: the Principled BRDF, or the scanner's Charlie
+  // sheen under model mismatch) in the scene's fibre frame.
   int held_out_lights = 0;
   double rerender_relative_rmse = 0;
-  // The same figure for the truth's own maps on the output grid (each pixel's footprint-mean
-  // parameters and unit normal, rendered as one pixel): what a material holding the truth's means
-  // reaches. 0 when the output is not coarser than the truth (the truth is then interpolated, and
-  // rendered as such); on a coarser output a pixel's facets render otherwise than their mean. Not
-  // a lower bound: a material fitted to the pixel's appearance can come closer (plain at 3x: 5.66
-  // against 7.35 %, docs/fitting.md "The truth's own maps under held-out lights").
+  // The same figure for the truth's own maps on the output grid as a Principled material (each
+  // pixel's footprint-mean parameters and unit normal, rendered as one pixel): what a material
+  // holding the truth's means reaches. 0 when the output is not coarser than the truth and the
+  // truth is Principled (the truth is then interpolated, and rendered as such); on a coarser
+  // output a pixel's facets render otherwise than their mean, and under model mismatch the
+  // Principled lobes otherwise than the fabric's. Not a lower bound: a material fitted to the
+  // pixel's appearance can come closer (plain at 3x: 5.66 against 7.35 %, docs/fitting.md "The
+  // truth's own maps under held-out lights").
   double rerender_truth_maps_relative_rmse = 0;
 };
 

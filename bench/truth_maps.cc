@@ -44,6 +44,12 @@ TruthMaps ReadTruthMaps(const fs::path& truth_dir) {
   };
   TruthMaps t;
   t.scene = truth.value("scene", std::string());
+  if (truth.contains("reflectance_model")) {
+    const json& model = truth["reflectance_model"];
+    if (!model.is_string() || !synthetic::ParseReflectanceModel(model.get<std::string>(), &t.model)) {
+      throw InputError(truth_file.string(), "/reflectance_model", "\"principled\" or \"cloth_mismatch\"");
+    }
+  }
   t.height_mm = read("height_mm", true);
   t.normal = read("normal", true);
   t.base_color = read("base_color", true);

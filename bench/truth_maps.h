@@ -13,11 +13,15 @@
 #include <string>
 
 #include "core/image.h"
+#include "datasets_synthetic/scene.h"
 
 namespace u3mscan::bench {
 
 struct TruthMaps {
   std::string scene;
+  // The model the scene was rendered with (truth.json /reflectance_model; absent: principled, as
+  // truth folders written before the field). The evaluation renders the truth with it.
+  synthetic::ReflectanceModel model = synthetic::ReflectanceModel::kPrincipled;
   double pitch_mm = 0.0;
   double x0_mm = 0.0;  // left edge of the truth grid
   double y1_mm = 0.0;  // top edge of the truth grid
@@ -30,7 +34,8 @@ struct TruthMaps {
 
 // Default file names: <key>.exr with key height_mm, normal, base_color, alpha, tangent, roughness,
 // specular, specular_tint, sheen, sheen_tint, anisotropic, metallic.
-// Throws InputError naming truth.json or the map file when the folder cannot be read.
+// Throws InputError naming truth.json or the map file when the folder cannot be read, or naming
+// /reflectance_model when it is not "principled" or "cloth_mismatch".
 TruthMaps ReadTruthMaps(const std::filesystem::path& truth_dir);
 
 }  // namespace u3mscan::bench

@@ -282,6 +282,20 @@ std::vector<std::string> SceneNames() {
   return names;
 }
 
+const char* ReflectanceModelName(ReflectanceModel model) {
+  return model == ReflectanceModel::kClothMismatch ? "cloth_mismatch" : "principled";
+}
+
+bool ParseReflectanceModel(const std::string& name, ReflectanceModel* model) {
+  for (ReflectanceModel m : {ReflectanceModel::kPrincipled, ReflectanceModel::kClothMismatch}) {
+    if (name == ReflectanceModelName(m)) {
+      *model = m;
+      return true;
+    }
+  }
+  return false;
+}
+
 SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {
   const auto& presets = internal::Presets();
   const auto it = presets.find(name);

@@ -29,6 +29,11 @@ namespace u3mscan::synthetic {
 // mismatch.
 enum class ReflectanceModel { kPrincipled, kClothMismatch };
 
+// The model's name in truth.json /reflectance_model: "principled" or "cloth_mismatch".
+const char* ReflectanceModelName(ReflectanceModel model);
+// The model a truth.json name stands for; false (and *model untouched) for any other name.
+bool ParseReflectanceModel(const std::string& name, ReflectanceModel* model);
+
 // Nominal Principled parameters of one yarn (or surface) of a scene, before the per-thread and
 // per-fibre variation that the maps carry. Geometry in mm (0 where it does not apply).
 struct YarnTruth {

@@ -47,10 +47,6 @@ const std::vector<MapEntry>& Maps() {
   return maps;
 }
 
-const char* ModelName(ReflectanceModel model) {
-  return model == ReflectanceModel::kClothMismatch ? "cloth_mismatch" : "principled";
-}
-
 json YarnJson(const YarnTruth& y) {
   return json{{"name", y.name},
               {"base_color", {y.base_color[0], y.base_color[1], y.base_color[2]}},
@@ -103,7 +99,7 @@ json TruthJson(const SceneTruth& t) {
               {"scene", t.name},
               {"description", t.description},
               {"seed", t.seed},
-              {"reflectance_model", ModelName(t.model)},
+              {"reflectance_model", ReflectanceModelName(t.model)},
               {"grid",
                {{"width", t.height_mm.width()},
                 {"height", t.height_mm.height()},
@@ -204,12 +200,7 @@ SceneTruth ReadTruth(const fs::path& dir, json* json_out) {
   t.seed = Get<std::uint64_t>(doc, file, "/seed");
   t.pitch_mm = Get<double>(doc, file, "/grid/pitch_mm");
   const int width = Get<int>(doc, file, "/grid/width"), height = Get<int>(doc, file, "/grid/height");
-  const std::string model = Get<std::string>(doc, file, "/reflectance_model");
-  if (model == "principled") {
-    t.model = ReflectanceModel::kPrincipled;
-  } else if (model == "cloth_mismatch") {
-    t.model = ReflectanceModel::kClothMismatch;
-  } else {
+  if (!ParseReflectanceModel(Get<std::string>(doc, file, "/reflectance_model"), &t.model)) {
     throw InputError(file, "/reflectance_model", "\"principled\" or \"cloth_mismatch\"");
   }
   t.height_min_mm = Get<double>(doc, file, "/height_range_mm/0");
