@@ -53,7 +53,7 @@ PrincipledParams<T> ToPrincipled(const T* p, const Vec3<T>& base_color) {
 // Factor that turns a residual of squared norm `sq` into one of squared norm rho(sq).
 template <typename T>
 T RobustFactor(const T& sq, const RobustLoss& loss) {
-  using std::log;
+  using std::log1p;
   using std::sqrt;
   const double a = loss.scale;
   switch (loss.kind) {
@@ -67,8 +67,10 @@ T RobustFactor(const T& sq, const RobustLoss& loss) {
       }
       return T(1);
     case RobustLossKind::kCauchy:
-      // rho(s) = a^2 log(1 + s / a^2).
-      if (sq > T(kTinySquaredResidual)) return T(a) * sqrt(log(T(1) + sq / T(a * a)) / sq);
+      // rho(s) = a^2 log(1 + s / a^2), by log1p: log(1 + x) is exactly 0 for x below the double
+      // epsilon, which made the factor 0 and its derivative (sqrt at 0) infinite for a residual a
+      // hair from the data (noise-free renders: Ceres rejected those evaluations).
+      if (sq > T(kTinySquaredResidual)) return T(a) * sqrt(log1p(sq / T(a * a)) / sq);
       return T(1);
   }
   return T(1);

@@ -188,6 +188,36 @@ TEST(BrdfCost, RobustResidualCarriesTheLoss) {
   EXPECT_GT(outliers, 0) << "the test data must exercise the robust branch";
 }
 
+// Observations a hair from the data (noise-free renders, 1e-9 relative): the Cauchy loss is then
+// the square itself, |r'| = |r|, with a finite Jacobian. log(1 + s / a^2) rounds to 0 there, which
+// made the residual 0 and its derivative infinite.
+constexpr double kHairPerturbation = 1e-9;
+constexpr double kTinyResidualFactorTolerance = 1e-6;  // relative: 1 - factor ~ s / (2 a^2)
+
+TEST(BrdfCost, TheCauchyLossOfANearlyExactObservationIsFiniteAndQuadratic) {
+  const ParameterVector p = Params(0.9, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0);
+  const auto obs = Render(p, {0.002, 0.002, 0.002}, kHairPerturbation, 5);
+  PixelCostSettings plain, cauchy;
+  plain.loss.kind = RobustLossKind::kNone;
+  cauchy.loss = {RobustLossKind::kCauchy, 2.0};
+  Eigen::VectorXd r0, r2;
+  Eigen::MatrixXd j0, j2;
+  ASSERT_TRUE(EvaluatePixelJacobian(p, obs, plain, &r0, &j0));
+  ASSERT_TRUE(EvaluatePixelJacobian(p, obs, cauchy, &r2, &j2));
+  int in_the_rounding_band = 0;
+  for (std::size_t i = 0; i < obs.size(); ++i) {
+    const double s = r0.segment<3>(3 * i).squaredNorm();
+    // The band where 1 + s / a^2 == 1 in double precision.
+    if (s > 0.0 && 1.0 + s / 4.0 == 1.0) ++in_the_rounding_band;
+    for (int c = 0; c < 3; ++c) {
+      const int row = static_cast<int>(3 * i) + c;
+      EXPECT_NEAR(r2(row), r0(row), kTinyResidualFactorTolerance * std::abs(r0(row))) << "observation " << i;
+      EXPECT_TRUE(j2.row(row).allFinite()) << "observation " << i << ": " << j2.row(row);
+    }
+  }
+  EXPECT_GT(in_the_rounding_band, 0) << "the data must reach the band where log(1 + s / a^2) rounds to 0";
+}
+
 TEST(BrdfCost, DefaultsAreTheU3mDefaults) {
   EXPECT_EQ(FitParameterDefault(FitParameter::kRoughness), 0.7);
   EXPECT_EQ(FitParameterDefault(FitParameter::kSpecular), 0.5);
