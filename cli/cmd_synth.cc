@@ -33,6 +33,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
     bool no_calibration = false;
     bool no_pose = false;
     bool no_thickness = false;
+    bool no_noise = false;
     std::string calibration_roles = "all";
     std::string out;
   };
@@ -58,6 +59,9 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
   sub.add_flag("--no-thickness", args->no_thickness,
                "Leave sample.thickness_mm out of capture.json (the maps are then made on the table plane z = 0, not "
                "on the sample's face)");
+  sub.add_flag("--no-noise", args->no_noise,
+               "Expose the frames without sensor noise (shot, read, fixed pattern; only the rounding to digital numbers): the "
+               "same capture as without the flag, to measure what the noise costs");
   sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();
   return std::function<int()>([args] {
     ParseSize(args->size, &args->options.width, &args->options.height);
@@ -69,6 +73,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
         synthetic::CalibrationRolesFromList(args->calibration_roles, "--calibration-frames");
     args->options.capture.write_pose = !args->no_pose;
     args->options.capture.write_thickness = !args->no_thickness;
+    args->options.sensor_noise = !args->no_noise;
     ProgressBar bar(GetLogLevel() > LogLevel::kInfo);
     args->options.capture.progress = bar.Callback();
     const synthetic::CaptureStats stats = synthetic::RunSynth(args->options, args->out);

@@ -261,7 +261,7 @@ json RigTruth(const SceneTruth& scene, const Rig& rig, const CaptureOptions& opt
       {"sensor",
        {{"bit_depth", s.bit_depth}, {"black_level_dn", s.black_level_dn}, {"white_level_dn", s.white_level_dn},
         {"full_well_e", s.full_well_e}, {"read_noise_e", s.read_noise_e}, {"fixed_pattern_dn", s.fixed_pattern_dn},
-        {"cfa", "RGGB"}}},
+        {"noise", s.noise}, {"cfa", "RGGB"}}},
       {"exposure_s", rig.exposure_s},
       {"ambient_irradiance", rig.ambient_irradiance},
       {"table_reflectance", rig.table_reflectance},

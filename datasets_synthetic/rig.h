@@ -61,6 +61,9 @@ struct SensorSpec {
   double full_well_e = 20000.0;   // electrons at v = 1 (sets the photon shot noise)
   double read_noise_e = 3.0;      // Gaussian, electrons rms
   double fixed_pattern_dn = 1.5;  // per-pixel dark offset (rms DN), the same in every frame of a camera
+  // false: no shot, read or fixed-pattern noise, only the rounding to DN (the expected frame): the
+  // same capture as with noise, to measure what the noise costs (`u3mscan synth --no-noise`).
+  bool noise = true;
 };
 
 struct Rig {

@@ -58,16 +58,18 @@ RawFrame ExposeSensor(const Image& linear, const SensorSpec& sensor, std::uint64
     for (std::size_t row = begin; row < end; ++row) {
       for (int col = 0; col < raw.width; ++col) {
         const std::size_t i = row * raw.width + col;
-        double pattern_dn, unused;
-        Gaussians(pattern_stream, i, &pattern_dn, &unused);
-        pattern_dn *= sensor.fixed_pattern_dn;
+        double pattern_dn = 0.0, unused;
+        if (sensor.noise) {
+          Gaussians(pattern_stream, i, &pattern_dn, &unused);
+          pattern_dn *= sensor.fixed_pattern_dn;
+        }
         for (int c = 0; c < raw.channels; ++c) {
           const int colour = bayer ? BayerChannel(static_cast<int>(row), col) : c;
           const int src = linear.channels() == 3 ? colour : 0;
           const double v = std::max(0.0, static_cast<double>(linear.plane(src)[i]));
           const double electrons = v * sensor.full_well_e;
-          double shot, read;
-          Gaussians(frame_seed, i * 3 + c, &shot, &read);
+          double shot = 0.0, read = 0.0;
+          if (sensor.noise) Gaussians(frame_seed, i * 3 + c, &shot, &read);
           const double noisy_e = electrons + std::sqrt(electrons) * shot + sensor.read_noise_e * read;
           const double dn = sensor.black_level_dn + pattern_dn + noisy_e * gain_dn;
           raw.dn[static_cast<std::size_t>(c) * n + i] = static_cast<std::uint16_t>(std::clamp(std::round(dn), 0.0, max_dn));
@@ -90,9 +92,9 @@ Image RawToLinear(const RawFrame& raw, const SensorSpec& sensor) {
 double NoiseSigma(const SensorSpec& sensor, double v) {
   const double range_dn = sensor.white_level_dn - sensor.black_level_dn;
   const double electrons = std::max(0.0, v) * sensor.full_well_e;
-  const double sigma_e2 = electrons + sensor.read_noise_e * sensor.read_noise_e;
-  const double sigma_dn2 = sigma_e2 * std::pow(range_dn / sensor.full_well_e, 2) +
-                           sensor.fixed_pattern_dn * sensor.fixed_pattern_dn + 1.0 / 12.0;
+  const double sigma_e2 = sensor.noise ? electrons + sensor.read_noise_e * sensor.read_noise_e : 0.0;
+  const double pattern_dn2 = sensor.noise ? sensor.fixed_pattern_dn * sensor.fixed_pattern_dn : 0.0;
+  const double sigma_dn2 = sigma_e2 * std::pow(range_dn / sensor.full_well_e, 2) + pattern_dn2 + 1.0 / 12.0;
   return std::sqrt(sigma_dn2) / range_dn;
 }
 

@@ -42,7 +42,8 @@ RawFrame ExposeSensor(const Image& linear, const SensorSpec& sensor, std::uint64
 Image RawToLinear(const RawFrame& raw, const SensorSpec& sensor);
 
 // Standard deviation (decoded units) of the sensor's noise at linear level v: shot, read, fixed
-// pattern and quantisation together. Tests use it to set tolerances.
+// pattern and quantisation together (quantisation alone without `noise`). Tests use it to set
+// tolerances.
 double NoiseSigma(const SensorSpec& sensor, double v);
 
 }  // namespace u3mscan::synthetic

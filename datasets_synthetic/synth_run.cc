@@ -73,7 +73,8 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   rig_options.pitch_mm = DpiToPitchMm(options.dpi);
   rig_options.seed = options.seed;
   rig_options.lights = options.lights;
-  const Rig rig = MakeRig(options.rig, rig_options);
+  Rig rig = MakeRig(options.rig, rig_options);
+  rig.sensor.noise = options.sensor_noise;
   SceneOptions scene_options;
   scene_options.width = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.width)));
   scene_options.height = std::max(1, static_cast<int>(std::lround(kSampleFillOfView * options.height)));

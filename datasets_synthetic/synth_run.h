@@ -26,6 +26,7 @@ struct SynthOptions {
   // 0 = AutoSupersample of the frame size. capture.supersample is overwritten with the choice.
   int supersample = 0;
   int lights = 0;               // light count, 0 = the rig preset's own (RigOptions::lights)
+  bool sensor_noise = true;     // false: frames without sensor noise (SensorSpec::noise)
   CaptureOptions capture;
   // Throws InputError naming the option (e.g. "--scene") and what was expected.
   void Check() const;

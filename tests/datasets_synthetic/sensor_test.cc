@@ -32,6 +32,24 @@ TEST(SensorTest, NoiseMeanAndSpreadFollowTheModel) {
   }
 }
 
+// Without noise a frame is the expected DN, rounded: every pixel of a flat frame decodes to the
+// level within half a DN, the same under any seed, and NoiseSigma says so (quantisation only).
+TEST(SensorTest, WithoutNoiseAFrameIsTheExpectedLevelRounded) {
+  SensorSpec sensor;
+  sensor.noise = false;
+  const double half_dn = 0.5 / (sensor.white_level_dn - sensor.black_level_dn);
+  const Image flat(kSize, kSize, 3, static_cast<float>(kLevel));
+  const RawFrame a = ExposeSensor(flat, sensor, 1, FrameSeed(1, "frames/a.dng"), false);
+  const RawFrame b = ExposeSensor(flat, sensor, 2, FrameSeed(9, "frames/b.dng"), true);
+  for (const RawFrame* raw : {&a, &b}) {
+    const Image decoded = RawToLinear(*raw, sensor);
+    for (float v : decoded.data()) ASSERT_NEAR(v, kLevel, half_dn);
+  }
+  EXPECT_LT(NoiseSigma(sensor, kLevel), half_dn);
+  sensor.noise = true;
+  EXPECT_GT(NoiseSigma(sensor, kLevel), 10.0 * half_dn) << "the noise the flag takes away";
+}
+
 TEST(SensorTest, SameSeedSameFrameOtherSeedOtherNoise) {
   const SensorSpec sensor;
   const Image flat(kSize, kSize, 3, 0.2f);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 #include <string>
@@ -10,7 +11,9 @@
 #include "capture/manifest.h"
 #include "core/error.h"
 #include "datasets_synthetic/rig.h"
+#include "datasets_synthetic/sensor.h"
 #include "datasets_synthetic/truth_writer.h"
+#include "u3m/image_io.h"
 
 namespace u3mscan::synthetic {
 namespace {
@@ -140,6 +143,42 @@ TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
   EXPECT_NEAR(truth.pitch_mm, grid.pitch_mm, 1e-12);
   EXPECT_EQ(truth.height_mm.data(), expected.height_mm.data());
   EXPECT_EQ(truth.normal.data(), expected.normal.data());
+  fs::remove_all(dir);
+}
+
+// --no-noise: the same capture without the sensor's noise. A sample frame then differs from the
+// noisy one by the noise alone (no more than kNoiseOnlyBound of the sensor's sigma at full scale,
+// RMS over the frame, and not 0), and truth.json says which it is.
+constexpr double kNoiseOnlyBound = 1.0;
+
+TEST(SynthRunTest, WithoutNoiseTheSameCaptureIsWrittenWithoutItsSensorNoise) {
+  const fs::path dir = fs::temp_directory_path() / ("u3mscan_synth_noise_test_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  SynthOptions options;
+  options.scene = "plain";
+  options.rig = "distant";
+  options.capture.calibration_frames = false;
+  options.capture.format = FrameFormat::kTiff;
+  RunSynth(options, dir / "noisy");
+  options.sensor_noise = false;
+  RunSynth(options, dir / "clean");
+  const Manifest m = ReadManifest(dir / "clean" / kCaptureSubdir);
+  const FrameSpec& sample = *std::find_if(m.frames.begin(), m.frames.end(),
+                                          [](const FrameSpec& f) { return f.role == FrameRole::kSample; });
+  const Image clean = ReadImageFile(dir / "clean" / kCaptureSubdir / sample.file, PixelEncoding::kLinear);
+  const Image noisy = ReadImageFile(dir / "noisy" / kCaptureSubdir / sample.file, PixelEncoding::kLinear);
+  ASSERT_EQ(clean.data().size(), noisy.data().size());
+  double diff2 = 0.0;
+  for (std::size_t i = 0; i < clean.data().size(); ++i) diff2 += std::pow(clean.data()[i] - noisy.data()[i], 2);
+  const double rms = std::sqrt(diff2 / static_cast<double>(clean.data().size()));
+  const SensorSpec sensor;
+  EXPECT_GT(rms, 0.0) << "the noise was not taken out";
+  EXPECT_LT(rms, kNoiseOnlyBound * NoiseSigma(sensor, 1.0)) << "more than the noise differs";
+  nlohmann::json clean_truth, noisy_truth;
+  ReadTruth(dir / "clean" / kTruthSubdir, &clean_truth);
+  ReadTruth(dir / "noisy" / kTruthSubdir, &noisy_truth);
+  EXPECT_EQ(clean_truth["rig"]["sensor"]["noise"], false);
+  EXPECT_EQ(noisy_truth["rig"]["sensor"]["noise"], true);
   fs::remove_all(dir);
 }
 
