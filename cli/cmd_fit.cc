@@ -7,6 +7,7 @@
 #include "cli/command.h"
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
+#include "pipeline/fit_json.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/stages.h"
 #include "pipeline/view_parallax.h"
@@ -54,7 +55,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
       maps.emplace_back(std::string(fitting::FitParameterName(p)) + ".exr", fit.parameter_maps[p]);
     }
     if (!fit.anisotropy_rotation_deg.empty()) maps.emplace_back("anisotropy_rotation.exr", fit.anisotropy_rotation_deg);
-    WriteStageOutputs(args->out, maps, {{"fit.json", fitting::FitResultToJson(fit)}});
+    WriteStageOutputs(args->out, maps, {{"fit.json", pipeline::FitResultToJson(fit).dump(2) + "\n"}});
     for (int p = 0; p < fitting::kFitParameterCount; ++p) {
       const auto& decision = fit.maps[p];
       std::cout << "  " << fitting::FitParameterName(p) << ": "

@@ -273,9 +273,4 @@ FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, con
 Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeometry& geometry,
                    const Observation& observation);
 
-// The fit report as JSON text (for fit.json): the map decisions (measured / constant / left out
-// and why, with U3M key names), per-cluster parameters with uncertainties, convergence, times per
-// stage and the main options. Format: docs/fitting.md.
-std::string FitResultToJson(const FitResult& result);
-
 }  // namespace u3mscan::fitting
