@@ -19,6 +19,7 @@
 
 #include "bench/svg_plot.h"
 #include "bench/truth_maps.h"
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "datasets_synthetic/capture_writer.h"
@@ -122,7 +123,7 @@ ChildResult RunChild(const std::vector<std::string>& args, const fs::path& log_p
   while (wait4(pid, &status, 0, &usage) < 0) {
     if (errno != EINTR) throw std::runtime_error("wait4 failed");
   }
-  result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.wall_s = SecondsSince(start);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
   result.max_rss_mib = static_cast<double>(usage.ru_maxrss) / 1024.0;  // Linux: KiB
   return result;
@@ -709,7 +710,7 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
   }
   if (!options.keep_work) fs::remove_all(options.out_dir / "work", ec);
   LogInfo() << "bench: " << rows.size() << " runs in "
-            << Fixed(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 1) << " s, written to "
+            << Fixed(SecondsSince(start), 1) << " s, written to "
             << options.out_dir.string();
   return rows;
 }

@@ -13,6 +13,7 @@
 
 #include "capture/dng_writer.h"
 #include "capture/manifest.h"
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/units.h"
@@ -26,13 +27,11 @@ namespace u3mscan::synthetic {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 using nlohmann::json;
 
 // 2020-01-01 00:00:00 UTC, the DateTime of every synthetic TIFF frame.
 constexpr std::time_t kFrameTimestampUtc = 1577836800;
 
-double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
 
 const char* FrameExtension(FrameFormat format) {
   switch (format) {
@@ -350,12 +349,12 @@ void WriteEverything(const SceneTruth& render_scene, const SceneTruth& scene, co
   for (std::size_t k = 0; k < jobs.size(); ++k) {
     const FrameJob& job = jobs[k];
     const RigCamera& cam = rig.cameras[job.camera];
-    const auto start = Clock::now();
+    const auto start = SteadyClock::now();
     if (renderer.camera_index() != job.camera) renderer.SetCamera(job.camera);
     const Image linear = job.render(renderer);
     const RawFrame raw = ExposeSensor(linear, rig.sensor, FrameSeed(rig.seed, "camera:" + cam.id),
                                       FrameSeed(rig.seed, NoiseName(job.spec.file)), options.format == FrameFormat::kDng);
-    stats->render_seconds += Seconds(start);
+    stats->render_seconds += SecondsSince(start);
     stats->megapixels_rendered += 1e-6 * cam.width * cam.height;
     WriteFrame(raw, rig.sensor, options.format, capture_dir / job.spec.file);
     ++stats->frames;
@@ -425,7 +424,7 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, cons
 CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTruth& scene, const Rig& rig,
                                    const CaptureOptions& options, const fs::path& out_dir,
                                    const TruthWriter& truth_writer) {
-  const auto start = Clock::now();
+  const auto start = SteadyClock::now();
   if (!options.Check()) throw std::invalid_argument("WriteSyntheticCapture: supersample must be >= 1");
   // Same rectangle: the renderer centres render_scene on the origin, the manifest's grid is scene's.
   const double tolerance = 1e-9 * (1.0 + scene.height_mm.width() * scene.pitch_mm + scene.height_mm.height() * scene.pitch_mm);
@@ -457,7 +456,7 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTr
     fs::remove_all(temp, ignored);
     throw;
   }
-  stats.total_seconds = Seconds(start);
+  stats.total_seconds = SecondsSince(start);
   LogInfo() << "synth: " << stats.frames << " frames, " << stats.megapixels_rendered << " MP rendered at "
             << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s in all) -> " << target.string();
   return stats;

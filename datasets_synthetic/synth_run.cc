@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/units.h"
@@ -85,7 +86,7 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   const OversampledScene scene = MakeOversampledScene(options.scene, scene_options, supersample);
   LogInfo() << "synth: scene '" << options.scene << "' " << scene_options.width << "x" << scene_options.height << " at "
             << options.dpi << " dpi, sampled " << scene.oversample << "x finer, " << supersample << "x" << supersample
-            << " rays per pixel; made in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
+            << " rays per pixel; made in " << SecondsSince(start) << " s";
   CaptureOptions capture = options.capture;
   capture.supersample = supersample;
   return WriteSyntheticCapture(scene.fine, scene.truth, rig, capture, out_dir, truth_writer);

@@ -10,6 +10,7 @@
 #include <limits>
 #include <string>
 
+#include "core/elapsed.h"
 #include "core/logging.h"
 #include "fitting/grid_start.h"
 #include "fitting/observability.h"
@@ -18,7 +19,6 @@
 namespace u3mscan::fitting {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using Matrix7 = Eigen::Matrix<double, kFitParameterCount, kFitParameterCount>;
 
 // A measured parameter whose posterior std at the final cluster solution exceeds this many max_std
@@ -50,7 +50,6 @@ constexpr double kSheenGridMinGrazing = 0.01;
 // Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
 constexpr double kMetallicStart = 0.7;
 
-double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
 
 }  // namespace
 
@@ -365,18 +364,18 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   Matrix7 fisher;
   // Fisher information (and the context's cost) at `p` with `free` deciding the colour passes.
   auto update_fisher = [&](const ParameterVector& p, const ParameterMask& free) {
-    const auto t_obs = Clock::now();
+    const auto t_obs = SteadyClock::now();
     double cost = 0.0;
     int residual_count = 0;
     fisher = FisherInformation(samples, p, options, free, &cost, &residual_count);
     context.cost = cost;
     context.residual_count = residual_count;
-    *observability_s += Seconds(t_obs);
+    *observability_s += SecondsSince(t_obs);
   };
   // The leave-out rule over `free`, then: keep a left-out parameter whose default the data exclude.
   auto decide = [&](const ParameterVector& p, const ParameterMask& free) {
     update_fisher(p, free);
-    const auto t_obs = Clock::now();
+    const auto t_obs = SteadyClock::now();
     ObservabilityDecision d = DecideObservability(fisher, free, context, options.observability);
     const double cost_at_fit = SamplesCost(samples, samples.pixels(), p, options, residuals, free);
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -395,7 +394,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
         d.reason[i] = buffer;
       }
     }
-    *observability_s += Seconds(t_obs);
+    *observability_s += SecondsSince(t_obs);
     return d;
   };
   // Left-out parameters to their defaults (held ones stay held) and a refit without them; returns

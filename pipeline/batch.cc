@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 
@@ -102,7 +103,7 @@ std::vector<JobOutcome> RunBatch(const std::vector<CaptureJob>& jobs, const Capt
         outcome.error = e.what();
         LogError() << jobs[i].name << ": " << e.what();
       }
-      outcome.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      outcome.seconds = SecondsSince(start);
     }
   };
   const int workers = std::clamp(options.parallel_captures, 1, static_cast<int>(std::max<std::size_t>(1, jobs.size())));

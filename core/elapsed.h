@@ -1,0 +1,16 @@
+#pragma once
+// Wall-clock time of a stage, for the run times the reports print: the steady clock (it never jumps
+// with the system clock), in seconds.
+
+#include <chrono>
+
+namespace u3mscan {
+
+using SteadyClock = std::chrono::steady_clock;
+
+// Seconds from `start` (SteadyClock::now() taken when the stage began) to now.
+inline double SecondsSince(SteadyClock::time_point start) {
+  return std::chrono::duration<double>(SteadyClock::now() - start).count();
+}
+
+}  // namespace u3mscan
