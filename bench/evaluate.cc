@@ -277,16 +277,20 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   // datasets_synthetic/renderer.h, evaluated in float as the renderer does) the re-render then
   // compares the material with what the fabric looks like, not with a Principled rendering of the
   // truth's parameters.
+  auto in_frame = [](const Eigen::Vector3d& d, const Eigen::Vector3d& n, const Eigen::Vector3d& t, const Eigen::Vector3d& b) {
+    return Eigen::Vector3d(d.dot(t), d.dot(b), d.dot(n));
+  };
   auto render = [&](const PrincipledParams<double>& params, const Eigen::Vector3d& n, const Eigen::Vector3d& t,
                     const Eigen::Vector3d& b, const Eigen::Vector3d& l) -> Eigen::Vector3d {
-    const Eigen::Vector3d ll(l.dot(t), l.dot(b), l.dot(n)), vl(view_in_world.dot(t), view_in_world.dot(b), view_in_world.dot(n));
+    const Eigen::Vector3d ll = in_frame(l, n, t, b), vl = in_frame(view_in_world, n, t, b);
     return EvaluatePrincipled(params, ll, vl) * std::max(0.0, ll.z());
   };
   const bool truth_is_principled = truth.model == synthetic::ReflectanceModel::kPrincipled;
+  ev.truth_reflectance_model = synthetic::ReflectanceModelName(truth.model);
   auto render_truth = [&](const PrincipledParams<double>& params, const Eigen::Vector3d& n, const Eigen::Vector3d& t,
                           const Eigen::Vector3d& b, const Eigen::Vector3d& l) -> Eigen::Vector3d {
     if (truth_is_principled) return render(params, n, t, b, l);
-    const Eigen::Vector3d ll(l.dot(t), l.dot(b), l.dot(n)), vl(view_in_world.dot(t), view_in_world.dot(b), view_in_world.dot(n));
+    const Eigen::Vector3d ll = in_frame(l, n, t, b), vl = in_frame(view_in_world, n, t, b);
     PrincipledParams<float> p;
     p.base_color = params.base_color.cast<float>();
     p.roughness = static_cast<float>(params.roughness);
@@ -523,7 +527,8 @@ json EvaluationToJson(const Evaluation& ev) {
                       {"truth_levelled", {{"levelling", ev.height_levelling}, {"rmse_mm", Number(ev.height_levelled_rmse_mm)},
                                           {"rmse_percent_of_range", Number(ev.height_levelled_rmse_percent)}}}}},
           {"parameters", parameters},
-          {"rerender", {{"held_out_lights", ev.held_out_lights}, {"relative_rmse", Number(ev.rerender_relative_rmse)},
+          {"rerender", {{"held_out_lights", ev.held_out_lights}, {"truth_reflectance_model", ev.truth_reflectance_model},
+                        {"relative_rmse", Number(ev.rerender_relative_rmse)},
                         {"truth_maps_relative_rmse", Number(ev.rerender_truth_maps_relative_rmse)}}}};
 }
 
@@ -560,7 +565,11 @@ std::string EvaluationToText(const Evaluation& ev) {
     }
   }
   s << "re-render, " << ev.held_out_lights << " held-out lights: relative RMSE " << Fixed(100.0 * ev.rerender_relative_rmse, 2)
-    << " % (the truth's own maps on this grid: " << Fixed(100.0 * ev.rerender_truth_maps_relative_rmse, 2) << " %)\n";
+    << " % (the truth's own maps on this grid: " << Fixed(100.0 * ev.rerender_truth_maps_relative_rmse, 2) << " %)";
+  if (ev.truth_reflectance_model != "principled") {
+    s << "; the truth rendered with its scene's model, " << ev.truth_reflectance_model << " (model mismatch)";
+  }
+  s << "\n";
   return s.str();
 }
 

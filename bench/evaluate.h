@@ -71,6 +71,7 @@ struct Evaluation {
   // was rendered with (truth.json /reflectance_model: the Principled BRDF, or the scanner's Charlie
   // sheen under model mismatch) in the scene's fibre frame.
   int held_out_lights = 0;
+  std::string truth_reflectance_model = "principled";  // truth.json /reflectance_model: how the truth was rendered
   double rerender_relative_rmse = 0;
   // The same figure for the truth's own maps on the output grid as a Principled material (each
   // pixel's footprint-mean parameters and unit normal, rendered as one pixel): what a material

@@ -329,7 +329,10 @@ TEST_F(EvaluateTest, TheTruthIsRenderedWithTheModelItsSceneWasRenderedWith) {
     if (name == "velvet") {
       EXPECT_LT(e.rerender_relative_rmse, kVelvetConstantSpecularRerender);
       EXPECT_EQ(e.rerender_truth_maps_relative_rmse, 0.0);
+      EXPECT_EQ(EvaluationToJson(e)["rerender"]["truth_reflectance_model"], "principled");
     } else {
+      EXPECT_EQ(EvaluationToJson(e)["rerender"]["truth_reflectance_model"], "cloth_mismatch");
+      EXPECT_NE(EvaluationToText(e).find("cloth_mismatch (model mismatch)"), std::string::npos) << EvaluationToText(e);
       EXPECT_GT(e.rerender_relative_rmse, kCharlieAgainstDisneyMinRerender);
       EXPECT_GT(e.rerender_truth_maps_relative_rmse, kCharlieAgainstDisneyMinRerender);
     }
