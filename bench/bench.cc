@@ -7,7 +7,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <fstream>
@@ -113,7 +112,7 @@ ChildResult RunChild(const std::vector<std::string>& args, const fs::path& log_p
   posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
   ChildResult result;
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = SteadyClock::now();
   pid_t pid = 0;
   const int spawn_error = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
@@ -688,7 +687,7 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
     if (cases.empty()) throw InputError("--only", "", "a part of at least one case name, e.g. plain_distant_48_fast");
   }
   std::vector<BenchRow> rows;
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = SteadyClock::now();
   for (std::size_t k = 0; k < cases.size(); ++k) {
     BenchRow row;
     try {

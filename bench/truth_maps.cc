@@ -47,7 +47,7 @@ TruthMaps ReadTruthMaps(const fs::path& truth_dir) {
   if (truth.contains("reflectance_model")) {
     const json& model = truth["reflectance_model"];
     if (!model.is_string() || !synthetic::ParseReflectanceModel(model.get<std::string>(), &t.model)) {
-      throw InputError(truth_file.string(), "/reflectance_model", "\"principled\" or \"cloth_mismatch\"");
+      throw InputError(truth_file.string(), "/reflectance_model", synthetic::ReflectanceModelChoices());
     }
   }
   t.height_mm = read("height_mm", true);

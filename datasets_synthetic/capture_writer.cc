@@ -3,7 +3,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -31,7 +30,6 @@ using nlohmann::json;
 
 // 2020-01-01 00:00:00 UTC, the DateTime of every synthetic TIFF frame.
 constexpr std::time_t kFrameTimestampUtc = 1577836800;
-
 
 const char* FrameExtension(FrameFormat format) {
   switch (format) {

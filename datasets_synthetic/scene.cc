@@ -286,14 +286,26 @@ const char* ReflectanceModelName(ReflectanceModel model) {
   return model == ReflectanceModel::kClothMismatch ? "cloth_mismatch" : "principled";
 }
 
+namespace {
+constexpr ReflectanceModel kReflectanceModels[] = {ReflectanceModel::kPrincipled, ReflectanceModel::kClothMismatch};
+}  // namespace
+
 bool ParseReflectanceModel(const std::string& name, ReflectanceModel* model) {
-  for (ReflectanceModel m : {ReflectanceModel::kPrincipled, ReflectanceModel::kClothMismatch}) {
+  for (ReflectanceModel m : kReflectanceModels) {
     if (name == ReflectanceModelName(m)) {
       *model = m;
       return true;
     }
   }
   return false;
+}
+
+std::string ReflectanceModelChoices() {
+  std::string out;
+  for (ReflectanceModel m : kReflectanceModels) {
+    out += std::string(out.empty() ? "" : " or ") + "\"" + ReflectanceModelName(m) + "\"";
+  }
+  return out;
 }
 
 SceneTruth MakeScene(const std::string& name, const SceneOptions& options) {

@@ -33,6 +33,8 @@ enum class ReflectanceModel { kPrincipled, kClothMismatch };
 const char* ReflectanceModelName(ReflectanceModel model);
 // The model a truth.json name stands for; false (and *model untouched) for any other name.
 bool ParseReflectanceModel(const std::string& name, ReflectanceModel* model);
+// What ParseReflectanceModel accepts, for error messages: "\"principled\" or \"cloth_mismatch\"".
+std::string ReflectanceModelChoices();
 
 // Nominal Principled parameters of one yarn (or surface) of a scene, before the per-thread and
 // per-fibre variation that the maps carry. Geometry in mm (0 where it does not apply).

@@ -1,7 +1,6 @@
 #include "datasets_synthetic/synth_run.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include "core/elapsed.h"
@@ -82,7 +81,7 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   scene_options.pitch_mm = rig_options.pitch_mm;
   scene_options.seed = options.seed;
   const int supersample = options.supersample > 0 ? options.supersample : AutoSupersample(options.width, options.height);
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = SteadyClock::now();
   const OversampledScene scene = MakeOversampledScene(options.scene, scene_options, supersample);
   LogInfo() << "synth: scene '" << options.scene << "' " << scene_options.width << "x" << scene_options.height << " at "
             << options.dpi << " dpi, sampled " << scene.oversample << "x finer, " << supersample << "x" << supersample

@@ -201,7 +201,7 @@ SceneTruth ReadTruth(const fs::path& dir, json* json_out) {
   t.pitch_mm = Get<double>(doc, file, "/grid/pitch_mm");
   const int width = Get<int>(doc, file, "/grid/width"), height = Get<int>(doc, file, "/grid/height");
   if (!ParseReflectanceModel(Get<std::string>(doc, file, "/reflectance_model"), &t.model)) {
-    throw InputError(file, "/reflectance_model", "\"principled\" or \"cloth_mismatch\"");
+    throw InputError(file, "/reflectance_model", ReflectanceModelChoices());
   }
   t.height_min_mm = Get<double>(doc, file, "/height_range_mm/0");
   t.height_max_mm = Get<double>(doc, file, "/height_range_mm/1");

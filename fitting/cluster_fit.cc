@@ -4,7 +4,6 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -49,7 +48,6 @@ constexpr double kRotationConvergedDeg = 0.1;
 constexpr double kSheenGridMinGrazing = 0.01;
 // Start of the metallic refit of a poorly explained cluster (metallic_if_demanded).
 constexpr double kMetallicStart = 0.7;
-
 
 }  // namespace
 

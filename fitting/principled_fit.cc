@@ -9,7 +9,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -25,7 +24,6 @@
 
 namespace u3mscan::fitting {
 namespace {
-
 
 // Pixels of the observation image sampled for its median luminance (the noise floor level).
 constexpr int kLevelSamples = 4096;
@@ -47,7 +45,6 @@ constexpr double kNormalConvergedTilt = 1e-5;
 constexpr double kMinStepScale = 0.3;
 // Largest number of parameters the per-pixel step refines (roughness, specular).
 constexpr int kMaxPixelParameters = 2;
-
 
 // Per-observation constants of the stack.
 struct ObservationInfo {

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <iomanip>
 #include <map>
 #include <mutex>
@@ -94,7 +93,7 @@ std::vector<JobOutcome> RunBatch(const std::vector<CaptureJob>& jobs, const Capt
         LogInfo() << jobs[i].name << ": output complete, skipped";
         continue;
       }
-      const auto start = std::chrono::steady_clock::now();
+      const auto start = SteadyClock::now();
       try {
         process(jobs[i]);
         outcome.ok = true;

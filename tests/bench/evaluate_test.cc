@@ -350,6 +350,7 @@ TEST_F(EvaluateTest, AnUnknownReflectanceModelIsAnInputErrorAndAnAbsentOneIsPrin
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/reflectance_model"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("truth.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("\"principled\" or \"cloth_mismatch\""), std::string::npos) << e.what();
   }
   truth.erase("reflectance_model");
   std::ofstream(file) << truth.dump();
