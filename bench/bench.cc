@@ -17,10 +17,12 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/svg_plot.h"
+#include "bench/table_cells.h"
 #include "bench/truth_maps.h"
 #include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
+#include "core/text_file.h"
 #include "datasets_synthetic/capture_writer.h"
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/scene.h"
@@ -39,13 +41,6 @@ namespace {
 constexpr const char* kRunId = "00000000-0000-4000-8000-000000000000";
 constexpr const char* kRunCreated = "2026-01-01T00:00:00Z";
 constexpr double kDpi = 300.0;
-
-std::string Fixed(double v, int digits) {
-  if (!std::isfinite(v)) return "";
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(digits) << v;
-  return s.str();
-}
 
 std::string Join(const std::vector<std::string>& items, const std::string& separator) {
   std::string out;
@@ -216,27 +211,10 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   return row;
 }
 
-std::string Csv(const std::string& text) {
-  if (text.find_first_of(",\"\n") == std::string::npos) return text;
-  std::string out = "\"";
-  for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
-  return out + "\"";
-}
-
 std::string ParameterCell(const BenchRow& row, int p) {
   if (row.status != "ok" || p >= static_cast<int>(row.evaluation.parameters.size())) return "";
   const ParameterError& e = row.evaluation.parameters[p];
   return e.measured ? Fixed(e.mean_abs_error, 4) : "not measured";
-}
-
-void WriteTextAtomically(const std::string& text, const fs::path& path) {
-  const fs::path temp = path.string() + ".partial";
-  {
-    std::ofstream out(temp, std::ios::binary);
-    out << text;
-    if (!out) throw InputError(path.string(), "", "a writable output folder");
-  }
-  fs::rename(temp, path);
 }
 
 std::string MethodLabel(const BenchRow& r) { return r.solver_used + "/" + r.integrator_used; }
@@ -443,7 +421,7 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     for (auto& cell : cells) cell = Csv(cell);
     s << Join(cells, ",") << "\n";
   }
-  WriteTextAtomically(s.str(), path);
+  WriteTextFileAtomically(path, s.str(), "a writable output folder");
 }
 
 void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& options, const fs::path& path) {
@@ -623,7 +601,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       << Fixed(full->total_s, 2) << " | " << Fixed(full->total_s - r.total_s, 2) << " |\n";
   }
   s << "\nPlots: `error_vs_time.svg`, `rerender_vs_time.svg`, `time_vs_megapixels.svg`, `time_vs_lights.svg`.\n";
-  WriteTextAtomically(s.str(), path);
+  WriteTextFileAtomically(path, s.str(), "a writable output folder");
 }
 
 void WriteBenchPlots(const std::vector<BenchRow>& rows, const fs::path& out_dir) {

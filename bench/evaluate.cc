@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "bench/error_stats.h"
 #include "bench/truth_footprint.h"
 #include "bench/truth_maps.h"
 #include "core/colour.h"
@@ -54,28 +55,6 @@ json ReadJsonFile(const fs::path& path, const std::string& what) {
   } catch (const json::exception& e) {
     throw InputError(path.string(), "", "valid JSON (" + std::string(e.what()) + ")");
   }
-}
-
-struct Stats {
-  double mean = kNaN, median = kNaN, p95 = kNaN;
-};
-
-// Mean, median and 95th percentile (nearest rank) of the finite values.
-Stats Summarise(std::vector<float> values) {
-  values.erase(std::remove_if(values.begin(), values.end(), [](float v) { return !std::isfinite(v); }), values.end());
-  Stats s;
-  if (values.empty()) return s;
-  double sum = 0;
-  for (float v : values) sum += v;
-  s.mean = sum / static_cast<double>(values.size());
-  auto rank = [&](double q) {
-    const std::size_t k = std::min(values.size() - 1, static_cast<std::size_t>(std::ceil(q * values.size())) - (q > 0 ? 1 : 0));
-    std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
-    return static_cast<double>(values[k]);
-  };
-  s.median = rank(0.5);
-  s.p95 = rank(0.95);
-  return s;
 }
 
 // Local shading frame of a normal turned by an anisotropy rotation (fitting/shading_frame.h, the
@@ -437,15 +416,15 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   if (ev.pixels_compared == 0) {
     throw InputError(truth_dir.string(), "", "a truth grid that overlaps the output's metric grid (report.json /calibration/grid)");
   }
-  const Stats normal_stats = Summarise(angle);
+  const ErrorStats normal_stats = Summarise(angle);
   ev.normal_mean_deg = normal_stats.mean;
   ev.normal_median_deg = normal_stats.median;
   ev.normal_p95_deg = normal_stats.p95;
-  const Stats a = Summarise(de_albedo);
+  const ErrorStats a = Summarise(de_albedo);
   ev.albedo_de_mean = a.mean;
   ev.albedo_de_median = a.median;
   ev.albedo_de_p95 = a.p95;
-  const Stats b = Summarise(de_base);
+  const ErrorStats b = Summarise(de_base);
   ev.base_color_de_mean = b.mean;
   ev.base_color_de_median = b.median;
   ev.base_color_de_p95 = b.p95;

@@ -1,28 +1,17 @@
 // `u3mscan synth`: the synthetic scanner. Renders a scene preset with a rig preset into a capture
 // folder (DIR/capture) plus its ground truth (DIR/truth); see docs/synthetic-scanner.md.
-#include <cstdio>
 #include <iostream>
 #include <string>
 
 #include "cli/command.h"
 #include "cli/progress_bar.h"
+#include "cli/size_option.h"
 #include "core/logging.h"
 #include "core/error.h"
 #include "datasets_synthetic/synth_run.h"
 
 namespace u3mscan::cli {
 namespace {
-
-// "7360x4912" -> width, height; InputError naming --size otherwise.
-void ParseSize(const std::string& text, int* width, int* height) {
-  int w = 0, h = 0;
-  char x = 0, extra = 0;
-  if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X')) {
-    throw InputError("--size", "", "WIDTHxHEIGHT in pixels, e.g. 64x64 or 7360x4912, got '" + text + "'");
-  }
-  *width = w;
-  *height = h;
-}
 
 U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture folder with ground truth", 500,
                          [](CLI::App& sub) {
@@ -64,7 +53,7 @@ U3MSCAN_REGISTER_COMMAND(kSynthCommand, "synth", "Render a synthetic capture fol
                "same capture as without the flag, to measure what the noise costs");
   sub.add_option("-o,--output", args->out, "Output folder DIR (must not exist or be empty)")->required();
   return std::function<int()>([args] {
-    ParseSize(args->size, &args->options.width, &args->options.height);
+    ParseSizeOption(args->size, "64x64 or 7360x4912", &args->options.width, &args->options.height);
     const auto format = synthetic::FrameFormatFromName(args->format);
     if (!format) throw InputError("--format", "", "dng, tiff or exr, got '" + args->format + "'");
     args->options.capture.format = *format;

@@ -6,14 +6,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <iomanip>
 #include <sstream>
-#include <system_error>
 
 #include "core/colour.h"
-#include "core/error.h"
 #include "core/markup_escape.h"
+#include "core/text_file.h"
 #include "pipeline/run_report.h"
 
 namespace u3mscan {
@@ -182,15 +180,7 @@ void WriteReportHtml(const RunReport& report, const std::filesystem::path& path)
   }
   html << "</body></html>\n";
 
-  const std::filesystem::path temp = path.string() + ".partial";
-  {
-    std::ofstream out(temp, std::ios::binary);
-    out << html.str();
-    if (!out) throw InputError(path.string(), "", "a writable location for the report");
-  }
-  std::error_code ec;
-  std::filesystem::rename(temp, path, ec);
-  if (ec) throw InputError(path.string(), "", "a location that can be renamed into: " + ec.message());
+  WriteTextFileAtomically(path, html.str(), "a writable location for the report");
 }
 
 }  // namespace u3mscan

@@ -1,9 +1,7 @@
 #include "pipeline/run_report.h"
 
-#include <fstream>
-#include <system_error>
 
-#include "core/error.h"
+#include "core/text_file.h"
 
 namespace u3mscan {
 
@@ -57,15 +55,7 @@ nlohmann::json RunReportToJson(const RunReport& report) {
 }
 
 void WriteReportJson(const RunReport& report, const std::filesystem::path& path) {
-  const std::filesystem::path temp = path.string() + ".partial";
-  {
-    std::ofstream out(temp, std::ios::binary);
-    out << RunReportToJson(report).dump(2) << "\n";
-    if (!out) throw InputError(path.string(), "", "a writable location for the report");
-  }
-  std::error_code ec;
-  std::filesystem::rename(temp, path, ec);
-  if (ec) throw InputError(path.string(), "", "a location that can be renamed into: " + ec.message());
+  WriteTextFileAtomically(path, RunReportToJson(report).dump(2) + "\n", "a writable location for the report");
 }
 
 }  // namespace u3mscan
