@@ -1,5 +1,6 @@
 // `u3mscan bench [--quick] [-o DIR]`: error against run time over a matrix of synthetic captures
-// (bench/bench.h, docs/bench.md). Each case runs `u3mscan process` in a child process of this
+// (bench/bench.h, docs/bench.md); `--diligent ROOT`: photometric stereo on DiLiGenT-format objects
+// (bench/diligent.h). Each case runs `u3mscan process` in a child process of this
 // same executable.
 #include <unistd.h>
 
@@ -7,6 +8,7 @@
 #include <iostream>
 
 #include "bench/bench.h"
+#include "bench/diligent.h"
 #include "cli/command.h"
 #include "core/error.h"
 
@@ -22,6 +24,7 @@ std::filesystem::path SelfExecutable(const char* fallback) {
 U3MSCAN_REGISTER_COMMAND(kBenchCommand, "bench", "Error against run time on synthetic captures (bench.csv, bench.md, SVG plots)", 70,
                          [](CLI::App& sub) {
   auto options = std::make_shared<bench::BenchOptions>();
+  auto diligent_root = std::make_shared<std::string>();
   sub.add_flag("--quick", options->quick, "Tiny sizes and few scenes (about a minute on 2 cores; for CI)");
   sub.add_option("-o,--out", options->out_dir, "Output folder for bench.csv, bench.md and the plots")->capture_default_str();
   sub.add_option("--threads", options->threads, "Threads of each `u3mscan process` run (0: all cores)")->check(CLI::Range(0, 1024));
@@ -29,8 +32,18 @@ U3MSCAN_REGISTER_COMMAND(kBenchCommand, "bench", "Error against run time on synt
   sub.add_flag("--keep-work", options->keep_work, "Keep the captures and run outputs under OUT/work");
   sub.add_option("--only", options->only, "Run only the cases whose name contains one of these (e.g. knit_distant_128_balanced)")
       ->delimiter(',');
-  return std::function<int()>([options] {
+  sub.add_option("--diligent", *diligent_root,
+                 "Instead of the synthetic matrix: photometric stereo on the DiLiGenT-format objects under ROOT (an object "
+                 "folder, or DiLiGenT's pmsData), every solver, errors against their true normals (diligent.csv, diligent.md; "
+                 "`u3mscan synth-ball` writes such an object)")
+      ->type_name("ROOT");
+  return std::function<int()>([options, diligent_root] {
     try {
+      if (!diligent_root->empty()) {
+        const auto runs = bench::RunDiLiGenTBench(*diligent_root, options->out_dir);
+        std::cout << "bench --diligent: " << runs.size() << " runs; " << (options->out_dir / "diligent.md").string() << "\n";
+        return kExitOk;
+      }
       options->executable = SelfExecutable("u3mscan");
       const auto rows = bench::RunBench(*options);
       int failed = 0;

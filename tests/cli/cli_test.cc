@@ -173,5 +173,26 @@ TEST_F(Cli, ConvertKeepsForeignCustomSectionsOfTheSamples) {
   EXPECT_EQ(custom.members()[1].first, "Vizoo");
 }
 
+TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
+  const RunResult too_big = U3mscan("synth-ball --size 96x80 --radius 60 -o " + Path("ball"));
+  EXPECT_EQ(too_big.exit_code, 2) << too_big.output;
+  EXPECT_NE(too_big.output.find("--radius"), std::string::npos) << too_big.output;
+  EXPECT_FALSE(fs::exists(dir_ / "ball"));
+  const RunResult no_objects = U3mscan("bench --diligent " + Path("nothing") + " -o " + Path("out"));
+  EXPECT_EQ(no_objects.exit_code, 2) << no_objects.output;
+  EXPECT_NE(no_objects.output.find("light_directions.txt"), std::string::npos) << no_objects.output;
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // A small ball and its benchmark: every method in the table.
+  ASSERT_EQ(U3mscan("synth-ball --size 48x40 --radius 16 --lights 12 -o " + Path("ball")).exit_code, 0);
+  const RunResult bench = U3mscan("bench --diligent " + Path("ball") + " -o " + Path("out"));
+  ASSERT_EQ(bench.exit_code, 0) << bench.output;
+  std::ifstream md(dir_ / "out/diligent.md");
+  std::stringstream text;
+  text << md.rdbuf();
+  for (const char* method : {"| ls | lambert |", "| ls | burley |", "| robust | lambert |", "| robust | burley |"}) {
+    EXPECT_NE(text.str().find(method), std::string::npos) << method << "\n" << text.str();
+  }
+}
+
 }  // namespace
 }  // namespace u3mscan
