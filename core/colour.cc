@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/principled_brdf.h"
+
 namespace u3mscan {
 
 double SrgbToLinear(double encoded) {
@@ -87,6 +89,6 @@ double Ciede2000(const Lab& lab1, const Lab& lab2) {
   return sqrt(tl * tl + tc * tc + th * th + rt * tc * th);
 }
 
-double PrincipledLuminance(const Rgb& c) { return 0.3 * c[0] + 0.6 * c[1] + 0.1 * c[2]; }
+double PrincipledLuminance(const Rgb& c) { return brdf::kTintLumR * c[0] + brdf::kTintLumG * c[1] + brdf::kTintLumB * c[2]; }
 
 }  // namespace u3mscan

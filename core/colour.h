@@ -21,7 +21,8 @@ Lab LinearSrgbToLab(const Rgb& linear_rgb);
 // CIEDE2000 colour difference (Sharma, Wu, Dalal 2005), kL = kC = kH = 1.
 double Ciede2000(const Lab& a, const Lab& b);
 
-// Relative luminance weights of the Principled BRDF's tint (docs/principled-brdf.md):
+// Relative luminance with the weights of the Principled BRDF's tint (core/principled_brdf.h,
+// brdf::TintLuminance; docs/principled-brdf.md):
 // lum = 0.3 R + 0.6 G + 0.1 B. Not Rec.709 luminance; kept as Disney wrote it.
 double PrincipledLuminance(const Rgb& linear_rgb);
 

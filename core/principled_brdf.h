@@ -85,10 +85,18 @@ T SchlickWeight(const T& u) {
   return m2 * m2 * m;
 }
 
-// Tint colour: base colour normalised by its luminance (0.3, 0.6, 0.1 weights), white when black.
+// Luminance weights of the tint colour (Burley 2012): what "luminance" means wherever the fit and
+// the colour code speak of a base colour's brightness.
+inline constexpr double kTintLumR = 0.3, kTintLumG = 0.6, kTintLumB = 0.1;
+template <typename T>
+T TintLuminance(const Vec3<T>& rgb) {
+  return T(kTintLumR) * rgb(0) + T(kTintLumG) * rgb(1) + T(kTintLumB) * rgb(2);
+}
+
+// Tint colour: base colour normalised by its luminance, white when black.
 template <typename T>
 Vec3<T> TintColor(const Vec3<T>& base_color) {
-  const T lum = T(0.3) * base_color(0) + T(0.6) * base_color(1) + T(0.1) * base_color(2);
+  const T lum = TintLuminance(base_color);
   if (lum > T(0)) return base_color / lum;
   return Vec3<T>(T(1), T(1), T(1));
 }

@@ -16,10 +16,6 @@
 namespace u3mscan::fitting {
 namespace {
 
-// Luminance weights of the Principled tint (core/principled_brdf.h TintColor).
-constexpr double kLumR = 0.3;
-constexpr double kLumG = 0.6;
-constexpr double kLumB = 0.1;
 // Smallest luminance the luminance passes use: a black pixel gives the core's white tint anyway.
 constexpr double kMinLuminance = 1e-6;
 // Guards a weighted normal equation whose diagonal vanishes (no diffuse signal at all).
@@ -93,7 +89,7 @@ Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observatio
   T previous_h = T(0);
   for (int pass = 0; pass < passes; ++pass) {
     if (pass > 0) {
-      const T g = T(kLumR) * color(0) + T(kLumG) * color(1) + T(kLumB) * color(2);
+      const T g = brdf::TintLuminance(color);
       const T h = g - luminance;
       T next = g;
       if (pass > 1) {
@@ -106,7 +102,7 @@ Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observatio
     }
     // Probe colour of luminance l: its tint is (1/0.3, 0, 0), the tint of every colour of that
     // luminance scaled the same way, so f(probe) separates A (red minus green) from s (green).
-    const Vec3<T> probe(luminance / T(kLumR), T(0), T(0));
+    const Vec3<T> probe(luminance / T(brdf::kTintLumR), T(0), T(0));
     const PrincipledParams<T> params = ToPrincipled(p, probe);
     T num[3] = {T(0), T(0), T(0)};
     T den[3] = {T(0), T(0), T(0)};
@@ -116,7 +112,7 @@ Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observatio
       const Vec3<T> v = o.view_local.cast<T>();
       const Vec3<T> f = EvaluatePrincipled(params, l, v);
       const double geometry = o.light_local.z() * o.irradiance;  // cos_l * E
-      const T a = (f(0) - f(1)) * (T(kLumR) * geometry) / luminance;
+      const T a = (f(0) - f(1)) * (T(brdf::kTintLumR) * geometry) / luminance;
       const T s = f(1) * geometry;
       scratch[2 * i] = a;
       scratch[2 * i + 1] = s;

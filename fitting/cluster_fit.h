@@ -10,6 +10,7 @@
 #include <span>
 #include <vector>
 
+#include "core/principled_brdf.h"
 #include "fitting/brdf_cost.h"
 #include "fitting/principled_fit.h"
 
@@ -35,8 +36,8 @@ ParameterMask Candidates(const FitOptions& options);
 // the relative noise the options declare, whichever is larger (noise alone is not a mismatch).
 double MismatchThreshold(const FitOptions& options);
 
-// Luminance with the Principled tint weights (core/colour.h, PrincipledLuminance).
-inline double Luminance(const Eigen::Vector3d& c) { return 0.3 * c(0) + 0.6 * c(1) + 0.1 * c(2); }
+// Luminance with the Principled tint weights (core/principled_brdf.h, brdf::TintLuminance).
+inline double Luminance(const Eigen::Vector3d& c) { return brdf::TintLuminance(c); }
 
 // Smallest luminance to start the base-colour luminance passes from.
 inline constexpr double kMinStartLuminance = 1e-3;

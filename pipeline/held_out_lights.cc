@@ -4,6 +4,7 @@
 #include <cmath>
 #include <set>
 
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "reconstruction/cast_shadows.h"
 
@@ -73,7 +74,7 @@ std::vector<std::size_t> TakeHeldOutFrames(const Manifest& manifest, const std::
 
 HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                                 std::vector<Observation> held_out, const StageOptions& options) {
-  const double start = StageClock();
+  const double start = SteadySeconds();
   // The held-out observations on the fitted stack's grid, lights and views (light indices kept).
   Stack check;
   check.side = stack.side;
@@ -88,7 +89,7 @@ HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stac
                                          geometry.height_mm};
   HeldOutSums sums;
   sums.Add(fit, check, surface);
-  return sums.Finish(StageClock() - start);
+  return sums.Finish(SteadySeconds() - start);
 }
 
 void HeldOutSums::Add(const fitting::FitResult& fit, const Stack& held_out, const fitting::SurfaceGeometry& geometry) {

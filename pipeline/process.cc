@@ -1,12 +1,12 @@
 #include "pipeline/process.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <system_error>
 
 #include "capture/rectification.h"
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/system_stats.h"
@@ -202,7 +202,7 @@ bool IsOutputComplete(const CaptureJob& job, const ProcessOptions& options) {
 ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& options, const ProgressCallback& progress) {
   std::string why;
   if (!options.Check(&why)) throw InputError("command line", "", why);
-  const double run_start = StageClock();
+  const double run_start = SteadySeconds();
   ProcessResult result;
   RunReport& report = result.report;
   report.capture_name = job.name;
@@ -282,7 +282,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     if (backlight.empty()) {
       report.steps.push_back({"alpha " + side, false, "no backlight frame", 0.0});
     } else {
-      const double start = StageClock();
+      const double start = SteadySeconds();
       const std::size_t index = backlight.front();
       const CameraCalibration* camera = prepared.calibration.FindCamera(prepared.capture.frame(index).camera);
       if (!camera) throw std::logic_error("calibration lacks camera " + prepared.capture.frame(index).camera);
@@ -293,7 +293,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
       report.steps.push_back({"alpha " + side, true,
                               alpha.empty() ? estimate.note
                                             : "holes cover " + std::to_string(100.0 * estimate.hole_fraction) + " %",
-                              StageClock() - start});
+                              SteadySeconds() - start});
     }
 
     // The whole side at once when its stack fits the budget, else band by band (tiled_side.h).
@@ -453,7 +453,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
 
   // The custom section lists every parameter decision (the same ones the writer applies); run
   // times stay out of it so that two runs write the same material.
-  const double write_start = StageClock();
+  const double write_start = SteadySeconds();
   std::vector<ParameterRecord> decided;
   for (const SideMaps& side : request.sides) {
     for (const auto& s : side.scalars) decided.push_back({side.side + "/" + s.u3m_key, s.source, s.reason, s.value, 0.0, s.unreliable_reason});
@@ -464,7 +464,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   report.parameters = written.parameters;
   report.quality = quality;
   report.steps.push_back({"write U3M " + std::string(SchemaVersionName(written.version)) + (options.package ? " package" : ""),
-                          true, std::to_string(written.files.size()) + " texture files", StageClock() - write_start});
+                          true, std::to_string(written.files.size()) + " texture files", SteadySeconds() - write_start});
 
   if (options.debug_maps) {
     const fs::path dir = job.out_dir / "maps";
@@ -479,7 +479,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     }
   }
 
-  report.total_seconds = StageClock() - run_start;
+  report.total_seconds = SteadySeconds() - run_start;
   report.peak_memory_mib = static_cast<double>(PeakResidentBytes()) / (1024.0 * 1024.0);
   WriteReportHtml(report, job.out_dir / "report.html");
   WriteReportJson(report, job.out_dir / "report.json");  // last: marks the output complete

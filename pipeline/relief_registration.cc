@@ -6,6 +6,7 @@
 #include <limits>
 #include <vector>
 
+#include "core/elapsed.h"
 #include "core/units.h"
 #include "reconstruction/cast_shadows.h"
 
@@ -131,7 +132,7 @@ double MarkHiddenFromTiltedViews(const Image& surface_z_mm, const MetricGrid& he
 
 Stack BuildSideStackOnRelief(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
                              const Image& alpha, Stack on_plane, RunReport* report, const ProgressCallback& progress) {
-  const double start = StageClock();
+  const double start = SteadySeconds();
   const int top = MostVerticalView(on_plane);
   const std::string top_id = on_plane.views.at(static_cast<std::size_t>(top)).camera_id;
   const double top_tilt = ViewTiltDeg(on_plane, top);
@@ -144,7 +145,7 @@ Stack BuildSideStackOnRelief(const PreparedCapture& prepared, const std::string&
   relief = SideReconstruction();
   float lo = 1e30f, hi = -1e30f;
   for (float v : z.plane(0)) lo = std::min(lo, v), hi = std::max(hi, v);
-  const double reconstruct_seconds = StageClock() - start;
+  const double reconstruct_seconds = SteadySeconds() - start;
   // The same frames pass the same checks again: their warnings are in the report already, from
   // the build on the face's plane; only the step is kept.
   RunReport rebuild;

@@ -1,10 +1,10 @@
 #include "pipeline/stages.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 
+#include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 
@@ -40,15 +40,11 @@ double SignalPerCosine(const Stack& stack, const Observation& o) {
 
 }  // namespace
 
-double StageClock() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOptions& options, RunReport* report,
                                const ProgressCallback& progress) {
-  double start = StageClock();
+  double start = SteadySeconds();
   Capture capture = Capture::Open(capture_dir, options.capture);
-  report->steps.push_back({"read manifest", true, std::to_string(capture.frame_count()) + " frames listed", StageClock() - start});
+  report->steps.push_back({"read manifest", true, std::to_string(capture.frame_count()) + " frames listed", SteadySeconds() - start});
 
   std::vector<std::string> sides;
   for (const char* side : {"front", "back"}) {
@@ -90,9 +86,9 @@ PreparedCapture PrepareCapture(const std::filesystem::path& capture_dir, StageOp
     report->steps.push_back({"back side", false, "the capture has no back-side sample frames: back = front", 0.0});
   }
 
-  start = StageClock();
+  start = SteadySeconds();
   CalibrationResult calibration = Calibrate(capture, options.calibration, progress);
-  const double calibrate_s = StageClock() - start;
+  const double calibrate_s = SteadySeconds() - start;
   for (const StepReport& step : calibration.steps) {
     report->steps.push_back({"calibration: " + step.step, step.ran, step.detail, 0.0});
   }
@@ -163,7 +159,7 @@ std::vector<std::size_t> CheckSideStack(const PreparedCapture& prepared, const s
 
 Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, const StageOptions& options,
                      RunReport* report, const ProgressCallback& progress, const Image& surface_z_mm) {
-  const double start = StageClock();
+  const double start = SteadySeconds();
   CalibrationOptions calibration_options = options.calibration;
   calibration_options.side = side;
   Stack stack = BuildStack(prepared.capture, prepared.calibration, calibration_options, progress, surface_z_mm);
@@ -171,7 +167,7 @@ Stack BuildSideStack(const PreparedCapture& prepared, const std::string& side, c
   report->steps.push_back({"rectify " + side + (surface_z_mm.empty() ? "" : " on the relief"), true,
                            std::to_string(stack.observations.size()) + " observations on a " +
                                std::to_string(stack.grid.width) + "x" + std::to_string(stack.grid.height) + " grid",
-                           StageClock() - start});
+                           SteadySeconds() - start});
   return stack;
 }
 
@@ -193,21 +189,21 @@ StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string&
                          Image* normal) {
   const std::string name = "level " + side;
   if (levelling == reconstruction::Levelling::kNone) return {name, false, "--level none: the sample's shape is kept", 0.0};
-  const double start = StageClock();
+  const double start = SteadySeconds();
   const reconstruction::LevellingResult removed = reconstruction::LevelRelief(levelling, height_mm, normal, valid);
   if (removed.weighted_pixels <= 0.0) return {name, false, "too few valid pixels to fit a " + reconstruction::LevellingName(levelling), 0.0};
   char detail[240];
   std::snprintf(detail, sizeof detail, "%s removed: %.1f um peak to valley, tilt up to %.3f deg; normals %s",
                 reconstruction::LevellingName(levelling).c_str(), 1000.0 * removed.peak_to_valley_mm, removed.max_tilt_deg,
                 normal ? "turned by the tilt (--level-normals)" : "kept as measured");
-  return {name, true, detail, StageClock() - start};
+  return {name, true, detail, SteadySeconds() - start};
 }
 
 SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, const Image& alpha,
                                    RunReport* report, const ProgressCallback& progress) {
   SideReconstruction out;
   const bool near = HasPointLights(*stack);
-  double start = StageClock();
+  double start = SteadySeconds();
   reconstruction::ShadowMarkingSummary shadows;
   if (options.mark_cast_shadows) {
     out.photometric_stereo = reconstruction::RunPhotometricStereoMarkingShadows(stack, options.photometric_stereo,
@@ -222,7 +218,7 @@ SideReconstruction ReconstructSide(Stack* stack, const StageOptions& options, co
                            true,
                            near ? "near point lights, height refined " + std::to_string(ps.near_iterations) + " rounds"
                                 : "distant lights",
-                           StageClock() - start - shadows.mark_seconds});
+                           SteadySeconds() - start - shadows.mark_seconds});
   report->steps.push_back(
       CastShadowStep(options, out.cast_shadow_share, near, shadows.mark_seconds, out.cast_shadow_solved_again_share));
   if (!near) {
@@ -246,7 +242,7 @@ void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& option
     for (std::size_t i = 0; i < v.size(); ++i) v[i] = a[i] >= 0.5f ? 1.0f : 0.0f;
   }
 
-  const double start = StageClock();
+  const double start = SteadySeconds();
   if (near && !ps.height_mm.empty() && alpha.empty()) {
     out.height_mm = ps.height_mm;
     report->steps.push_back({"integration", false, "done inside the near-light refinement", 0.0});
@@ -255,7 +251,7 @@ void IntegrateSide(const MetricGrid& grid, bool near, const StageOptions& option
     integration.pitch_mm = grid.pitch_mm;
     out.height_mm = reconstruction::IntegrateNormals(ps.normal, out.valid, integration, progress).height_mm;
     report->steps.push_back({"integration (" + reconstruction::IntegratorName(integration.method) + ")", true,
-                             alpha.empty() ? "whole grid" : "holes masked out", StageClock() - start});
+                             alpha.empty() ? "whole grid" : "holes masked out", SteadySeconds() - start});
   }
   out.height_mm.set_pitch_mm(grid.pitch_mm);
 }
@@ -282,18 +278,18 @@ void ReportFitStep(const fitting::FitResult& fit, std::string detail, double sec
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
-  const double start = StageClock();
+  const double start = SteadySeconds();
   fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
                                    geometry.height_mm};
   fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
-  ReportFitStep(fit, std::to_string(fit.clusters.size()) + " clusters", StageClock() - start, report);
+  ReportFitStep(fit, std::to_string(fit.clusters.size()) + " clusters", SteadySeconds() - start, report);
   return fit;
 }
 
 bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool near, const StageOptions& options,
                         SideReconstruction* side, RunReport* report, const ProgressCallback& progress) {
   if (fit->normals.empty()) return false;
-  const double start = StageClock();
+  const double start = SteadySeconds();
   side->photometric_stereo.normal = std::move(fit->normals);
   fit->normals = Image();
   side->photometric_stereo.normal.set_pitch_mm(grid.pitch_mm);
@@ -304,7 +300,7 @@ bool AdoptFittedNormals(fitting::FitResult* fit, const MetricGrid& grid, bool ne
   side->height_mm.set_pitch_mm(grid.pitch_mm);
   report->steps.push_back({"integration of the fitted normals (" + reconstruction::IntegratorName(integration.method) + ")",
                            true, "normals refined with the fitted model; height integrated again",
-                           StageClock() - start});
+                           SteadySeconds() - start});
   return true;
 }
 

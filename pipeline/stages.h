@@ -106,7 +106,5 @@ StepRecord LevelSideMaps(reconstruction::Levelling levelling, const std::string&
 Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                      int max_observations, double* mean_out, std::size_t* pixels_out = nullptr);
 
-// Seconds since `start` (a steady clock reading from StageClock()).
-double StageClock();
 
 }  // namespace u3mscan

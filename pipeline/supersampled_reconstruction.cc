@@ -8,6 +8,7 @@
 #include <vector>
 #include <utility>
 
+#include "core/elapsed.h"
 #include "capture/stack_builder.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/fine_colour.h"
@@ -82,7 +83,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   if (keep_fine) *keep_fine = FineReconstruction();
   if (k <= 1) return ReconstructSide(stack, options, alpha, report, progress);
   const MetricGrid& grid = stack->grid;
-  double start = StageClock();
+  double start = SteadySeconds();
   const CalibrationResult fine_calibration = FineCalibration(prepared.calibration, k);
   CalibrationOptions calibration_options = options.calibration;
   calibration_options.side = side;
@@ -103,7 +104,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
                            std::to_string(fine.observations.size()) + " observations on a " +
                                std::to_string(fine.grid.width) + "x" + std::to_string(fine.grid.height) +
                                " grid, for photometric stereo",
-                           StageClock() - start});
+                           SteadySeconds() - start});
 
   // The fine reconstruction's own steps describe a grid the run does not write; one step says what ran.
   RunReport fine_report;
@@ -111,7 +112,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
       ReconstructSide(&fine, fine_options, alpha.empty() ? Image() : UpsampleNearest(alpha, k), &fine_report, progress);
   const bool every_observation = fine.observations.size() == stack->observations.size();
   const reconstruction::PhotometricStereoResult& f = fine_side.photometric_stereo;
-  start = StageClock();
+  start = SteadySeconds();
   SideReconstruction out;
   // Each fine pixel put where its surface point lies in plan, by the fine heights, as the fit's
   // refined normals are (FitSideWithFineNormals): the maps' normals, albedo and heights, and so the
@@ -134,7 +135,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
                 PlacementDetail(placement, fine.grid.pitch_mm).c_str());
   report->steps.push_back({"photometric stereo (" + reconstruction::PsSolverName(options.photometric_stereo.solver) + ", " +
                                std::to_string(k) + "x finer grid)",
-                           true, detail, solve_seconds + (StageClock() - start)});
+                           true, detail, solve_seconds + (SteadySeconds() - start)});
   if (!near) {
     report->steps.push_back({"near-light refinement", false,
                              "distant lights: one light direction per frame, no per-pixel light vectors to refine", 0.0});
@@ -150,14 +151,14 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   // reported is photometric stereo's, on the fine grid, as the banded path reports it: the maps'
   // heights are too smooth to shadow a yarn's wall (plain at 3x: 0.02 % of the maps' observations
   // against 13.7 % of the fine ones).
-  start = StageClock();
+  start = SteadySeconds();
   if (options.mark_cast_shadows) {
     reconstruction::MarkCastShadows(out.height_mm, stack, options.cast_shadows);
     out.cast_shadow_share = fine_side.cast_shadow_share;
     out.cast_shadow_solved_again_share = fine_side.cast_shadow_solved_again_share;
   }
   report->steps.push_back(
-      CastShadowStep(options, out.cast_shadow_share, near, StageClock() - start, out.cast_shadow_solved_again_share));
+      CastShadowStep(options, out.cast_shadow_share, near, SteadySeconds() - start, out.cast_shadow_solved_again_share));
   if (keep_fine && every_observation) {
     keep_fine->k = k;
     keep_fine->stack = std::move(fine);
@@ -192,7 +193,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   if (fine_height_mm) *fine_height_mm = Image();
   if (fine.k <= 1 || !options.fit.refine_pixel_normals) return FitSide(stack, geometry, options, report, progress);
   ReportObliqueView(stack, report);
-  const double start = StageClock();
+  const double start = SteadySeconds();
   const int k = fine.k;
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
                                          geometry.height_mm};
@@ -209,7 +210,7 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   fitting::PixelTally tally;
   fitting::FitPixelRows(model, stack, surface, 0, &fit, &tally, progress);
   fitting::FinishPixelMaps(model, tally, &fit);
-  const double fine_start = StageClock();
+  const double fine_start = SteadySeconds();
   std::string placed;  // what the plan placement moved, for the report
   {
     fitting::FitResult fine_fit = fitting::StartPixelMaps(model, fine.stack.grid);
@@ -239,16 +240,16 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
       }
     }
   }
-  const double fine_seconds = StageClock() - fine_start;
+  const double fine_seconds = SteadySeconds() - fine_start;
   fine = FineReconstruction();
-  fit.times.total_s = StageClock() - start;
+  fit.times.total_s = SteadySeconds() - start;
   char seconds[64];
   std::snprintf(seconds, sizeof seconds, " (%.2f s of it)", fine_seconds);
   ReportFitStep(fit,
                 std::to_string(fit.clusters.size()) + " clusters fitted on the " +
                     (clusters_on_fine_grid ? std::to_string(k) + "x finer grid" : std::string("maps' grid")) +
                     "; normals refined on the " + std::to_string(k) + "x finer grid" + seconds + placed,
-                StageClock() - start, report);
+                SteadySeconds() - start, report);
   return fit;
 }
 

@@ -7,6 +7,7 @@
 
 #include "capture/stack_builder.h"
 #include "pipeline/band_shadow_marks.h"
+#include "core/elapsed.h"
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/fine_colour.h"
@@ -41,14 +42,14 @@ class Bands {
   // pixels hidden from a tilted view are marked (relief_registration.h).
   void PutOnRelief(Image surface_z_mm) { relief_ = std::move(surface_z_mm); }
   Stack Build(const std::vector<std::size_t>& frames, int band) {
-    const double start = StageClock();
+    const double start = SteadySeconds();
     Stack stack = BuildStackRows(capture_, calibration_, options_, frames, Row0(band), Rows(band), {}, relief_);
     if (!relief_.empty()) {
       const double pixels = static_cast<double>(stack.grid.width) * stack.grid.height;
       hidden_sum_ += MarkHiddenFromTiltedViews(relief_, calibration_.grid, &stack) * pixels;
       hidden_pixels_ += pixels;
     }
-    build_seconds_ += StageClock() - start;
+    build_seconds_ += SteadySeconds() - start;
     ++builds_;
     return stack;
   }
@@ -200,10 +201,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   double shadow_seconds = 0.0;
   reconstruction::CastShadowCounts shadow_counts;  // of the last photometric stereo sweep
   auto mark = [&](const Image& height, const MetricGrid& height_grid, Stack* stack) {
-    const double start = StageClock();
+    const double start = SteadySeconds();
     const reconstruction::CastShadowCounts counts =
         reconstruction::MarkCastShadows(height, height_grid, stack, options.cast_shadows);
-    shadow_seconds += StageClock() - start;
+    shadow_seconds += SteadySeconds() - start;
     return counts;
   };
 
@@ -318,7 +319,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
           fine_band_marks.Keep(band, solved.Row0(b));
         }
       }
-      const double start = StageClock();
+      const double start = SteadySeconds();
       const Image band_height =
           solve_height ? CropRows(*solve_height, solved.Row0(b), solved.Rows(b))
                        : Image(solve_grid.width, solved.Rows(b), 1, static_cast<float>(ps_options.integration.mean_height_mm),
@@ -350,7 +351,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                                                    solved.Row0(b));
       }
       PasteBand(band_ps, bands.Row0(b), &full);
-      solve_seconds += StageClock() - start;
+      solve_seconds += SteadySeconds() - start;
       ReportProgress(progress, stage, static_cast<double>(b + 1) / bands.count());
     }
     if (marks) {  // every pixel solved again, but those an earlier solve kept
@@ -417,9 +418,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   const bool first_sweep_gathers = clusters_on_fine_grid && first_sweep_is_last;
   keep_last_fine_solve = fine_fit && !rounds_follow && options.reuse_band_solves;
   if (choose_roughness) {
-    const double start = StageClock();
+    const double start = SteadySeconds();
     const double roughness = reconstruction::ChooseDiffuseRoughness(out.sample, ps_options);
-    solve_seconds += StageClock() - start;
+    solve_seconds += SteadySeconds() - start;
     if (roughness < 0.0) {
       ps_options.diffuse_model = reconstruction::DiffuseModel::kLambert;
       LogInfo() << "photometric stereo: Lambert's law fits the sample better than any Burley diffuse lobe";
@@ -447,7 +448,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   if (options.mark_cast_shadows && !(near && ps_options.refine_height)) {
     reconstruction::IntegrationOptions integration = ps_options.integration;
     integration.pitch_mm = grid.pitch_mm;
-    const double start = StageClock();
+    const double start = SteadySeconds();
     shadow_height = reconstruction::IntegrateNormals(ps.normal, ps.confidence, integration).height_mm;
     // The first sweep's fine normals and confidence: kept whole in fine_first, else alone.
     const bool whole_kept = !fine_first.normal.empty();
@@ -461,7 +462,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       fine_last_normal = Image();
       fine_last_confidence = Image();
     }
-    shadow_seconds += StageClock() - start;
+    shadow_seconds += SteadySeconds() - start;
     const PhotometricStereoResult* earlier = solve_again_after_marks ? (fine_factor > 1 ? &fine_first : &ps) : nullptr;
     ps = solve_sweep(nullptr, &shadow_height, nullptr, "photometric stereo (cast shadows left out)",
                      {.gather_fine_sample = clusters_on_fine_grid, .last_sweep = true, .earlier = earlier});
@@ -497,7 +498,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     fine_integration.pitch_mm = fine_calibration.grid.pitch_mm;
     Image fine_round_height, fine_kept_height;  // the round's fine heights and the round's before
     reconstruction::CastShadowCounts counts_before_sweep = shadow_counts;
-    const double solve_before = solve_seconds, shadow_before = shadow_seconds, start = StageClock();
+    const double solve_before = solve_seconds, shadow_before = shadow_seconds, start = SteadySeconds();
     ps = reconstruction::RefineNearLightHeights(
         std::move(ps), round_options, grid.pitch_mm,
         [&](const Image& height) {
@@ -522,7 +523,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (ps.near_iterations > 0) fine_near_height = std::move(fine_round_height);
     // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
     // photometric stereo's.
-    solve_seconds = solve_before + (StageClock() - start) - (shadow_seconds - shadow_before);
+    solve_seconds = solve_before + (SteadySeconds() - start) - (shadow_seconds - shadow_before);
   }
   if (options.mark_cast_shadows && near && ps_options.refine_height && ps.near_iterations > 0) shadow_height = ps.height_mm;
   if (near && ps.height_mm.empty()) {
@@ -567,7 +568,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // used for the near lights' vectors (no new near-light rounds: the top view moves by hundredths
   // of a pixel).
   if (NeedsReliefRegistration(out.sample)) {
-    const double relief_start = StageClock();
+    const double relief_start = SteadySeconds();
     const int builds_before = bands.builds();
     RunReport first_pass;  // the heights of the plane's solve place the relief; the run keeps the final ones
     IntegrateSide(grid, near, options, alpha, &out.reconstruction, &first_pass, progress);
@@ -606,7 +607,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                   out.sample.views.at(static_cast<std::size_t>(top)).camera_id.c_str(), ViewTiltDeg(out.sample, top),
                   z_lo, z_hi, prepared.calibration.surface_z_mm, bands.count(), bands.builds() - builds_before,
                   100.0 * bands.hidden_share());
-    report->steps.push_back({"relief registration " + side, true, detail, StageClock() - relief_start});
+    report->steps.push_back({"relief registration " + side, true, detail, SteadySeconds() - relief_start});
   }
   out.reconstruction.cast_shadow_share = shadow_height.empty() ? 0.0 : shadow_counts.share();
   out.reconstruction.cast_shadow_solved_again_share = shadow_height.empty() || near ? -1.0 : solved_again_share;
@@ -615,7 +616,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
 
   // Fit: clusters on the sample, then the per-pixel step band by band.
   ReportObliqueView(out.sample, report);
-  double start = StageClock();
+  double start = SteadySeconds();
   const double build_before_fit = bands.build_seconds() + fine_bands.build_seconds();
   // --ps-supersample: a fine band with the last sweep's normals and albedo (kept above, else solved
   // again as the last sweep solved it), its heights from the whole fine grid's: the surface's
@@ -645,9 +646,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     *band = fine_bands.Build(frames, b);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     if (!fine_band_marks.empty()) {
-      const double start = StageClock();
+      const double start = SteadySeconds();
       fine_band_marks.Apply(row0, band);
-      shadow_seconds += StageClock() - start;
+      shadow_seconds += SteadySeconds() - start;
     } else if (!fine_marks.empty()) {
       mark(fine_marks, fine_grid, band);
     }
@@ -702,7 +703,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   std::string placed;  // what the plan placement moved, for the report
   const bool fine_solves_kept = !fine_fit_normal.empty();
   if (fine_fit && !out.fit.normals.empty()) {
-    const double fine_start = StageClock();
+    const double fine_start = SteadySeconds();
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
     FineColourAverage colour(grid.width, grid.height, fine_factor);  // fine_colour.h
@@ -741,9 +742,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
                                               fine_factor, grid.pitch_mm, near, options, progress, placement,
                                               &out.fit.normals);
-    fine_fit_seconds = StageClock() - fine_start;
+    fine_fit_seconds = SteadySeconds() - fine_start;
   }
-  out.fit.times.total_s = StageClock() - start;
+  out.fit.times.total_s = SteadySeconds() - start;
   // The per-pixel step refined every pixel's normal band by band into the full-size map; the whole
   // normal map is in memory already, so the height is integrated again as in the untiled path.
   out.fitted_normals = fine_height.empty()
@@ -768,10 +769,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                   fine_solves_kept ? "the last sweep's fine solves kept" : "each fine band solved again as the last sweep did");
     detail += fine_detail + placed;
   }
-  ReportFitStep(out.fit, std::move(detail), StageClock() - start, report);
+  ReportFitStep(out.fit, std::move(detail), SteadySeconds() - start, report);
 
   // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
-  start = StageClock();
+  start = SteadySeconds();
   const int n = static_cast<int>(frames.size());
   const int used = std::min(n, std::max(1, residual_observations));
   std::vector<std::size_t> residual_frames;
@@ -795,14 +796,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     residual_pixels += pixels;
   }
   out.residual_mean = residual_pixels ? residual_sum / static_cast<double>(residual_pixels) : 0.0;
-  report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", StageClock() - start});
+  report->steps.push_back({"residual map", true, std::to_string(used) + " observations, band by band", SteadySeconds() - start});
   // Marking time of every sweep (photometric stereo, fit, residual), with the integration it needed.
   report->steps.push_back(CastShadowStep(options, out.reconstruction.cast_shadow_share, near, shadow_seconds,
                                          out.reconstruction.cast_shadow_solved_again_share));
 
   // Held-out lights: CheckHeldOutLights band by band (marks from the final heights, timed here).
   if (!held_out_frames.empty()) {
-    start = StageClock();
+    start = SteadySeconds();
     HeldOutSums sums;
     for (int b = 0; b < bands.count(); ++b) {
       Stack band = bands.Build(held_out_frames, b);
@@ -813,7 +814,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       sums.Add(BandFit(out.fit, row0, rows), band, BandSurface(geometry, row0, rows));
       ReportProgress(progress, "held-out lights", static_cast<double>(b + 1) / bands.count());
     }
-    out.held_out = sums.Finish(StageClock() - start);
+    out.held_out = sums.Finish(SteadySeconds() - start);
   }
   return out;
 }

@@ -3,7 +3,6 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <cmath>
 #include <limits>
@@ -12,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/elapsed.h"
 #include "core/logging.h"
 #include "core/parallel.h"
 #include "reconstruction/normal_integration.h"
@@ -46,10 +46,6 @@ class HeightField {
   const float* h_;
   int w_, rows_;
 };
-
-double Seconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
 
 }  // namespace
 
@@ -240,10 +236,10 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
   const double roughness = result.diffuse_roughness;
 
   if (!near) {
-    const double start = Seconds();
+    const double start = SteadySeconds();
     const Image height = IntegrateNormals(result.normal, result.confidence, integration).height_mm;
     out.counts = MarkCastShadows(height, stack, shadow_options);
-    out.mark_seconds += Seconds() - start;
+    out.mark_seconds += SteadySeconds() - start;
     // Nothing marked (e.g. lights high enough for the relief): the first solve stands.
     if (out.counts.marked == 0) {
       out.solved_again_share = 0.0;
@@ -271,9 +267,9 @@ PhotometricStereoResult RunPhotometricStereoMarkingShadows(Stack* stack, const P
       std::move(result), options, stack->grid.pitch_mm,
       [&](const Image& height) { return SolvePhotometricStereoAt(*stack, again, height); },
       [&](const Image& height, bool /*kept_round*/) {
-        const double start = Seconds();
+        const double start = SteadySeconds();
         out.counts = MarkCastShadows(height, stack, shadow_options);
-        out.mark_seconds += Seconds() - start;
+        out.mark_seconds += SteadySeconds() - start;
       },
       progress);
   result.diffuse_roughness = roughness;
