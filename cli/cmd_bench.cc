@@ -25,18 +25,23 @@ U3MSCAN_REGISTER_COMMAND(kBenchCommand, "bench", "Error against run time on synt
                          [](CLI::App& sub) {
   auto options = std::make_shared<bench::BenchOptions>();
   auto diligent_root = std::make_shared<std::string>();
-  sub.add_flag("--quick", options->quick, "Tiny sizes and few scenes (about a minute on 2 cores; for CI)");
+  CLI::Option* quick = sub.add_flag("--quick", options->quick, "Tiny sizes and few scenes (about a minute on 2 cores; for CI)");
   sub.add_option("-o,--out", options->out_dir, "Output folder for bench.csv, bench.md and the plots")->capture_default_str();
-  sub.add_option("--threads", options->threads, "Threads of each `u3mscan process` run (0: all cores)")->check(CLI::Range(0, 1024));
-  sub.add_option("--seed", options->seed, "Seed of the synthetic captures")->capture_default_str();
-  sub.add_flag("--keep-work", options->keep_work, "Keep the captures and run outputs under OUT/work");
-  sub.add_option("--only", options->only, "Run only the cases whose name contains one of these (e.g. knit_distant_128_balanced)")
+  CLI::Option* threads = sub.add_option("--threads", options->threads, "Threads of each `u3mscan process` run (0: all cores)")->check(CLI::Range(0, 1024));
+  CLI::Option* seed = sub.add_option("--seed", options->seed, "Seed of the synthetic captures")->capture_default_str();
+  CLI::Option* keep_work = sub.add_flag("--keep-work", options->keep_work, "Keep the captures and run outputs under OUT/work");
+  CLI::Option* only = sub.add_option("--only", options->only, "Run only the cases whose name contains one of these (e.g. knit_distant_128_balanced)")
       ->delimiter(',');
   sub.add_option("--diligent", *diligent_root,
                  "Instead of the synthetic matrix: photometric stereo on the DiLiGenT-format objects under ROOT (an object "
                  "folder, or DiLiGenT's pmsData), every solver, errors against their true normals (diligent.csv, diligent.md; "
                  "`u3mscan synth-ball` writes such an object)")
-      ->type_name("ROOT");
+      ->type_name("ROOT")
+      ->excludes(quick)
+      ->excludes(threads)
+      ->excludes(seed)
+      ->excludes(keep_work)
+      ->excludes(only);  // options of the synthetic matrix alone
   return std::function<int()>([options, diligent_root] {
     try {
       if (!diligent_root->empty()) {

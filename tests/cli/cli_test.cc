@@ -182,6 +182,8 @@ TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
   EXPECT_EQ(no_objects.exit_code, 2) << no_objects.output;
   EXPECT_NE(no_objects.output.find("light_directions.txt"), std::string::npos) << no_objects.output;
   EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // The synthetic matrix's options do not go with --diligent.
+  EXPECT_EQ(U3mscan("bench --diligent " + Path("nothing") + " --quick -o " + Path("out")).exit_code, 2);
   // A small ball and its benchmark: every method in the table.
   ASSERT_EQ(U3mscan("synth-ball --size 48x40 --radius 16 --lights 12 -o " + Path("ball")).exit_code, 0);
   const RunResult bench = U3mscan("bench --diligent " + Path("ball") + " -o " + Path("out"));
