@@ -41,12 +41,16 @@ struct BenchCase {
   // a camera at 600 dpi (size_px * 2 pixels, the same sample) processed with --dpi 300: group
   // "camera-finer".
   int camera_per_map = 1;
+  // With camera_per_map > 1: the maps at the camera's dpi (300 * camera_per_map), not the
+  // matrix's 300 dpi: a material that resolves what the camera resolves (group "held-out").
+  bool maps_at_camera_dpi = false;
   // u3mscan process --ps-supersample: 1 = photometric stereo on the maps' grid, 0 = as fine as
   // the camera resolves (pipeline/supersampled_reconstruction.h); group "camera-finer".
   int ps_supersample = 1;
   // u3mscan process --level: none | plane (the default) | quadratic (docs/process.md, "Levelling");
   // group "camera-finer" runs plain with quadratic too.
   std::string level = "plane";
+  double MapsDpi() const;         // the finished maps' dpi: 300, or the camera's with maps_at_camera_dpi
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;
 };

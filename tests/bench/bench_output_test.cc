@@ -202,6 +202,14 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
                           }),
             2)
       << "plain at 4x on the camera's grid, levelled by a plane and by a quadratic";
+  // And that 4x plain with lights held out, its maps at 300 dpi and at the camera's 1200.
+  std::set<std::string> held_out_at_4x;
+  for (const BenchCase& c : full) {
+    if (c.group == "held-out" && c.camera_per_map == 4) held_out_at_4x.insert(c.RunId());
+  }
+  EXPECT_EQ(held_out_at_4x, (std::set<std::string>{"plain_distant_128_cam4x_balanced_pss0_holdout-L02-L05-L09-L14",
+                                                   "plain_distant_128_cam4x_balanced_maps1200dpi_pss0_holdout-L02-L05-L09-L14"}));
+  for (const BenchCase& c : cases) EXPECT_DOUBLE_EQ(c.MapsDpi(), 300.0) << c.RunId();
 }
 
 }  // namespace
