@@ -44,6 +44,9 @@ struct BenchCase {
   // With camera_per_map > 1: the maps at the camera's dpi (300 * camera_per_map), not the
   // matrix's 300 dpi: a material that resolves what the camera resolves (group "held-out").
   bool maps_at_camera_dpi = false;
+  // false: the capture exposed without sensor noise (`u3mscan synth --no-noise`): what is left of
+  // a held-out error is the material's own (group "held-out").
+  bool sensor_noise = true;
   // u3mscan process --ps-supersample: 1 = photometric stereo on the maps' grid, 0 = as fine as
   // the camera resolves (pipeline/supersampled_reconstruction.h); group "camera-finer".
   int ps_supersample = 1;

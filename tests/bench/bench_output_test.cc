@@ -208,8 +208,14 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
     if (c.group == "held-out" && c.camera_per_map == 4) held_out_at_4x.insert(c.RunId());
   }
   EXPECT_EQ(held_out_at_4x, (std::set<std::string>{"plain_distant_128_cam4x_balanced_pss0_holdout-L02-L05-L09-L14",
-                                                   "plain_distant_128_cam4x_balanced_maps1200dpi_pss0_holdout-L02-L05-L09-L14"}));
-  for (const BenchCase& c : cases) EXPECT_DOUBLE_EQ(c.MapsDpi(), 300.0) << c.RunId();
+                                                   "plain_distant_128_cam4x_balanced_maps1200dpi_pss0_holdout-L02-L05-L09-L14",
+                                                   "plain_distant_128_cam4x_nonoise_balanced_maps1200dpi_pss0_holdout-L02-L05-L09-L14"}));
+  // Without sensor noise: the 1x plain and the 4x plain with 1200 dpi maps, lights held out.
+  EXPECT_EQ(std::count_if(full.begin(), full.end(), [](const BenchCase& c) { return !c.sensor_noise && c.group == "held-out"; }), 2);
+  for (const BenchCase& c : cases) {
+    EXPECT_DOUBLE_EQ(c.MapsDpi(), 300.0) << c.RunId();
+    EXPECT_TRUE(c.sensor_noise) << c.RunId();
+  }
 }
 
 }  // namespace
