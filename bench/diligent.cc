@@ -132,6 +132,85 @@ ObjectLayout ReadLayout(const fs::path& dir) {
 // The 3 colour channels of an image as read (a grey image gives its one channel three times).
 float Channel(const Image& image, int c, int row, int col) { return image.at(image.channels() >= 3 ? c : 0, row, col); }
 
+// The part of the image the object is solved on: the mask's bounding box and one pixel around it
+// (the neighbours the stability rules read).
+struct Crop {
+  int col0 = 0, row0 = 0, width = 0, height = 0;
+};
+
+Crop CropAroundMask(const Image& mask, const fs::path& mask_path) {
+  int col0 = mask.width(), col1 = -1, row0 = mask.height(), row1 = -1;
+  for (int row = 0; row < mask.height(); ++row) {
+    for (int col = 0; col < mask.width(); ++col) {
+      if (mask.at(0, row, col) > 0.0f) col0 = std::min(col0, col), col1 = std::max(col1, col), row0 = std::min(row0, row), row1 = std::max(row1, row);
+    }
+  }
+  if (col1 < 0) throw InputError(mask_path.string(), "", "a mask with the object non-zero (every pixel is 0)");
+  col0 = std::max(0, col0 - 1), row0 = std::max(0, row0 - 1);
+  col1 = std::min(mask.width() - 1, col1 + 1), row1 = std::min(mask.height() - 1, row1 + 1);
+  return {col0, row0, col1 - col0 + 1, row1 - row0 + 1};
+}
+
+bool InMask(const Image& mask, const Crop& crop, int row, int col) { return mask.at(0, crop.row0 + row, crop.col0 + col) > 0.0f; }
+
+// The true normals of the crop's mask pixels (one text line per pixel of the whole image) into
+// object->true_normal and object->on_object.
+void ReadTrueNormals(const fs::path& truth_path, const Image& mask, const Crop& crop, DiLiGenTObject* object) {
+  const int width = mask.width(), height = mask.height();
+  const std::vector<TextLine> truth_lines = ReadNonBlankLines(truth_path);
+  if (truth_lines.size() != static_cast<std::size_t>(width) * height) {
+    throw InputError(truth_path.string(), "", std::to_string(width) + " x " + std::to_string(height) + " = " +
+                                                  std::to_string(static_cast<long long>(width) * height) +
+                                                  " lines 'nx ny nz' (mask.png's size), got " + std::to_string(truth_lines.size()));
+  }
+  object->true_normal = Image(crop.width, crop.height, 3, 0.0f, 1.0);
+  object->on_object.assign(static_cast<std::size_t>(crop.width) * crop.height, 0);
+  for (int row = 0; row < crop.height; ++row) {
+    for (int col = 0; col < crop.width; ++col) {
+      if (!InMask(mask, crop, row, col)) continue;
+      const TextLine& line = truth_lines[static_cast<std::size_t>(crop.row0 + row) * width + crop.col0 + col];
+      const Eigen::Vector3d n = ParseTriple(truth_path, line, "nx ny nz");
+      // A pixel of the mask without a unit truth (DiLiGenT writes 0 0 0 off the object) is not compared.
+      if (std::abs(n.norm() - 1.0) > 0.1) continue;
+      const Eigen::Vector3d unit = n.normalized();
+      for (int c = 0; c < 3; ++c) object->true_normal.at(c, row, col) = static_cast<float>(unit(c));
+      object->on_object[static_cast<std::size_t>(row) * crop.width + col] = 1;
+    }
+  }
+}
+
+// One light's image on the crop, divided by the light's intensity; off the mask out of view,
+// clipped pixels saturated (counted on the object into *saturated).
+Observation ReadObservation(const fs::path& image_path, int light, const Eigen::Vector3d& intensity, const Image& mask,
+                            const Crop& crop, long long* saturated) {
+  const Image image = ReadImageFile(image_path, PixelEncoding::kLinear);
+  if (image.width() != mask.width() || image.height() != mask.height()) {
+    throw InputError(image_path.string(), "", std::to_string(mask.width()) + " x " + std::to_string(mask.height()) +
+                                                  " pixels like mask.png, got " + std::to_string(image.width()) + " x " +
+                                                  std::to_string(image.height()));
+  }
+  if (image.channels() != 1 && image.channels() < 3) throw InputError(image_path.string(), "", "a grey or RGB image");
+  Observation obs;
+  obs.view = 0;
+  obs.light = light;
+  obs.rgb = Image(crop.width, crop.height, 3, 0.0f, 1.0);
+  obs.flags.assign(static_cast<std::size_t>(crop.width) * crop.height, 0);
+  for (int row = 0; row < crop.height; ++row) {
+    for (int col = 0; col < crop.width; ++col) {
+      std::uint8_t& flags = obs.flags[static_cast<std::size_t>(row) * crop.width + col];
+      if (!InMask(mask, crop, row, col)) flags |= kOutOfView;
+      for (int c = 0; c < 3; ++c) {
+        const float value = Channel(image, c, crop.row0 + row, crop.col0 + col);
+        // Full scale is clipped: the sensor's white level (code 65535 of a 16-bit PNG reads 1).
+        if (value >= 1.0f) flags |= kSaturated;
+        obs.rgb.at(c, row, col) = static_cast<float>(value / intensity(c));
+      }
+      if ((flags & kSaturated) && !(flags & kOutOfView)) ++*saturated;
+    }
+  }
+  return obs;
+}
+
 }  // namespace
 
 std::vector<fs::path> FindDiLiGenTObjects(const fs::path& root) {
@@ -159,50 +238,17 @@ DiLiGenTObject ReadDiLiGenTObject(const fs::path& dir) {
 
   const fs::path mask_path = dir / "mask.png";
   const Image mask = ReadImageFile(mask_path, PixelEncoding::kLinear);
-  const int width = mask.width(), height = mask.height();
-  int col0 = width, col1 = -1, row0 = height, row1 = -1;
-  for (int row = 0; row < height; ++row) {
-    for (int col = 0; col < width; ++col) {
-      if (mask.at(0, row, col) > 0.0f) col0 = std::min(col0, col), col1 = std::max(col1, col), row0 = std::min(row0, row), row1 = std::max(row1, row);
-    }
-  }
-  if (col1 < 0) throw InputError(mask_path.string(), "", "a mask with the object non-zero (every pixel is 0)");
-  // The crop: the mask's bounding box and one pixel around it (the neighbours the stability rules read).
-  col0 = std::max(0, col0 - 1), row0 = std::max(0, row0 - 1);
-  col1 = std::min(width - 1, col1 + 1), row1 = std::min(height - 1, row1 + 1);
-  const int cw = col1 - col0 + 1, ch = row1 - row0 + 1;
-  auto in_mask = [&](int row, int col) { return mask.at(0, row0 + row, col0 + col) > 0.0f; };
-
-  // The truth: one line per pixel of the whole image.
-  const std::vector<TextLine> truth_lines = ReadNonBlankLines(layout.truth);
-  if (truth_lines.size() != static_cast<std::size_t>(width) * height) {
-    throw InputError(layout.truth.string(), "", std::to_string(width) + " x " + std::to_string(height) + " = " +
-                                                    std::to_string(static_cast<long long>(width) * height) +
-                                                    " lines 'nx ny nz' (mask.png's size), got " + std::to_string(truth_lines.size()));
-  }
-  object.true_normal = Image(cw, ch, 3, 0.0f, 1.0);
-  object.on_object.assign(static_cast<std::size_t>(cw) * ch, 0);
-  for (int row = 0; row < ch; ++row) {
-    for (int col = 0; col < cw; ++col) {
-      if (!in_mask(row, col)) continue;
-      const TextLine& line = truth_lines[static_cast<std::size_t>(row0 + row) * width + col0 + col];
-      const Eigen::Vector3d n = ParseTriple(layout.truth, line, "nx ny nz");
-      // A pixel of the mask without a unit truth (DiLiGenT writes 0 0 0 off the object) is not compared.
-      if (std::abs(n.norm() - 1.0) > 0.1) continue;
-      const Eigen::Vector3d unit = n.normalized();
-      for (int c = 0; c < 3; ++c) object.true_normal.at(c, row, col) = static_cast<float>(unit(c));
-      object.on_object[static_cast<std::size_t>(row) * cw + col] = 1;
-    }
-  }
+  const Crop crop = CropAroundMask(mask, mask_path);
+  ReadTrueNormals(layout.truth, mask, crop, &object);
 
   Stack& stack = object.stack;
   stack.side = "front";
-  stack.grid.width = cw;
-  stack.grid.height = ch;
+  stack.grid.width = crop.width;
+  stack.grid.height = crop.height;
   stack.grid.pitch_mm = 1.0;
   stack.grid.x0_mm = 0.0;
-  stack.grid.y1_mm = ch;
-  stack.views.push_back({"camera", Eigen::Vector3d(0.5 * cw, 0.5 * ch, kOrthographicDistanceMm)});
+  stack.grid.y1_mm = crop.height;
+  stack.views.push_back({"camera", Eigen::Vector3d(0.5 * crop.width, 0.5 * crop.height, kOrthographicDistanceMm)});
   for (std::size_t k = 0; k < layout.image_names.size(); ++k) {
     LightModel light;
     light.id = fs::path(layout.image_names[k]).stem().string();
@@ -210,33 +256,8 @@ DiLiGenTObject ReadDiLiGenTObject(const fs::path& dir) {
     light.direction_in_world = layout.directions[k];
     light.intensity_rgb = layout.intensities[k];
     stack.lights.push_back(light);
-
-    const fs::path image_path = dir / layout.image_names[k];
-    const Image image = ReadImageFile(image_path, PixelEncoding::kLinear);
-    if (image.width() != width || image.height() != height) {
-      throw InputError(image_path.string(), "", std::to_string(width) + " x " + std::to_string(height) + " pixels like mask.png, got " +
-                                                    std::to_string(image.width()) + " x " + std::to_string(image.height()));
-    }
-    if (image.channels() != 1 && image.channels() < 3) throw InputError(image_path.string(), "", "a grey or RGB image");
-    Observation obs;
-    obs.view = 0;
-    obs.light = static_cast<int>(k);
-    obs.rgb = Image(cw, ch, 3, 0.0f, 1.0);
-    obs.flags.assign(static_cast<std::size_t>(cw) * ch, 0);
-    for (int row = 0; row < ch; ++row) {
-      for (int col = 0; col < cw; ++col) {
-        std::uint8_t& flags = obs.flags[static_cast<std::size_t>(row) * cw + col];
-        if (!in_mask(row, col)) flags |= kOutOfView;
-        for (int c = 0; c < 3; ++c) {
-          const float value = Channel(image, c, row0 + row, col0 + col);
-          // Full scale is clipped: the sensor's white level (code 65535 of a 16-bit PNG reads 1).
-          if (value >= 1.0f) flags |= kSaturated;
-          obs.rgb.at(c, row, col) = static_cast<float>(value / layout.intensities[k](c));
-        }
-        if ((flags & kSaturated) && !(flags & kOutOfView)) ++object.saturated_observations;
-      }
-    }
-    stack.observations.push_back(std::move(obs));
+    stack.observations.push_back(ReadObservation(dir / layout.image_names[k], static_cast<int>(k), layout.intensities[k], mask,
+                                                 crop, &object.saturated_observations));
   }
   return object;
 }
