@@ -1,7 +1,6 @@
 #include "datasets_synthetic/synth_run.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,6 +12,7 @@
 #include "datasets_synthetic/rig.h"
 #include "datasets_synthetic/sensor.h"
 #include "datasets_synthetic/truth_writer.h"
+#include "tests/support/temp_dir.h"
 #include "u3m/image_io.h"
 
 namespace u3mscan::synthetic {
@@ -116,8 +116,8 @@ TEST(SynthRunTest, LightCountSpreadsOverTheRings) {
 
 // A real scene preset end to end at the tiny size: the capture reads back and covers the scene.
 TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
-  const fs::path dir = fs::temp_directory_path() / ("u3mscan_synth_run_test_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+  const test::TempDir temp;  // removed however the test ends
+  const fs::path& dir = temp.path();
   SynthOptions options;
   options.scene = "twill";
   options.rig = "distant";
@@ -143,7 +143,6 @@ TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
   EXPECT_NEAR(truth.pitch_mm, grid.pitch_mm, 1e-12);
   EXPECT_EQ(truth.height_mm.data(), expected.height_mm.data());
   EXPECT_EQ(truth.normal.data(), expected.normal.data());
-  fs::remove_all(dir);
 }
 
 // --no-noise: the same capture without the sensor's noise. A sample frame then differs from the
@@ -152,8 +151,8 @@ TEST(SynthRunTest, PresetSceneWritesAReadableCapture) {
 constexpr double kNoiseOnlyBound = 1.0;
 
 TEST(SynthRunTest, WithoutNoiseTheSameCaptureIsWrittenWithoutItsSensorNoise) {
-  const fs::path dir = fs::temp_directory_path() / ("u3mscan_synth_noise_test_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+  const test::TempDir temp;
+  const fs::path& dir = temp.path();
   SynthOptions options;
   options.scene = "plain";
   options.rig = "distant";
@@ -179,7 +178,6 @@ TEST(SynthRunTest, WithoutNoiseTheSameCaptureIsWrittenWithoutItsSensorNoise) {
   ReadTruth(dir / "noisy" / kTruthSubdir, &noisy_truth);
   EXPECT_EQ(clean_truth["rig"]["sensor"]["noise"], false);
   EXPECT_EQ(noisy_truth["rig"]["sensor"]["noise"], true);
-  fs::remove_all(dir);
 }
 
 }  // namespace
