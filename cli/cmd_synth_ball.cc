@@ -1,6 +1,5 @@
 // `u3mscan synth-ball`: a glossy ball in the DiLiGenT folder format, for `u3mscan bench
 // --diligent` where the real data set is not at hand (datasets_synthetic/diligent_ball.h).
-#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -39,11 +38,6 @@ U3MSCAN_REGISTER_COMMAND(kSynthBallCommand, "synth-ball",
   return std::function<int()>([args] {
     ParseSizeOption(args->size, "612x512", &args->options.width, &args->options.height);
     args->options.noise = !args->no_noise;
-    args->options.Check();
-    std::error_code ec;
-    if (std::filesystem::exists(args->out, ec) && !std::filesystem::is_empty(args->out, ec)) {
-      throw InputError(args->out, "", "an output folder that does not exist or is empty");
-    }
     const synthetic::DiLiGenTBall ball = synthetic::WriteDiLiGenTBall(args->out, args->options);
     std::cout << ball.light_directions.size() << " images of a ball of " << ball.object_pixels << " px ("
               << ball.saturated_observations << " observations clipped) -> " << args->out << "\n";

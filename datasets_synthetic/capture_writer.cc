@@ -1,13 +1,10 @@
 #include "datasets_synthetic/capture_writer.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
-#include <system_error>
 #include <vector>
 
 #include "capture/dng_writer.h"
@@ -16,6 +13,7 @@
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/units.h"
+#include "datasets_synthetic/atomic_folder.h"
 #include "datasets_synthetic/calibration_frames.h"
 #include "datasets_synthetic/renderer.h"
 #include "datasets_synthetic/sensor.h"
@@ -430,33 +428,14 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTr
       std::abs(render_scene.height_mm.height() * render_scene.pitch_mm - scene.height_mm.height() * scene.pitch_mm) > tolerance) {
     throw std::invalid_argument("WriteSyntheticCapture: the rendered scene and the truth cover different rectangles");
   }
-  std::error_code ec;
-  if (fs::exists(out_dir, ec) && !(fs::is_directory(out_dir, ec) && fs::is_empty(out_dir, ec))) {
-    throw InputError(out_dir.string(), "", "an output folder that does not exist yet or is empty");
-  }
-  const fs::path target = fs::absolute(out_dir).lexically_normal();
-  const fs::path parent = target.parent_path();
-  fs::create_directories(parent, ec);
-  if (ec) throw InputError(out_dir.string(), "", "a parent folder that can be created: " + ec.message());
-  // Built with append() rather than operator+ on a literal: GCC 12 warns falsely (-Wrestrict) there.
-  std::string temp_name = ".";
-  temp_name.append(target.filename().string()).append(".partial-").append(std::to_string(::getpid()));
-  const fs::path temp = parent / temp_name;
-  fs::remove_all(temp, ec);
   CaptureStats stats;
-  try {
-    fs::create_directories(temp);
-    WriteEverything(render_scene, scene, rig, options, temp, truth_writer, &stats);
-    if (fs::exists(target)) fs::remove(target);  // the empty folder the caller may have made
-    fs::rename(temp, target);
-  } catch (...) {
-    std::error_code ignored;
-    fs::remove_all(temp, ignored);
-    throw;
-  }
+  WriteFolderAtomically(out_dir, [&](const fs::path& staging) {
+    WriteEverything(render_scene, scene, rig, options, staging, truth_writer, &stats);
+  });
   stats.total_seconds = SecondsSince(start);
   LogInfo() << "synth: " << stats.frames << " frames, " << stats.megapixels_rendered << " MP rendered at "
-            << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s in all) -> " << target.string();
+            << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s in all) -> "
+            << fs::absolute(out_dir).lexically_normal().string();
   return stats;
 }
 

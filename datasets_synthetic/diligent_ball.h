@@ -60,9 +60,9 @@ struct DiLiGenTBall {
   long long saturated_observations = 0;            // object pixels clipped at full scale in some channel
 };
 
-// Renders the ball and writes the folder `dir` (created; existing files of the same names are
-// replaced). Throws InputError for options that fail Check() and naming the file when one cannot be
-// written.
+// Renders the ball and writes the folder `dir`, which must not exist or be empty; written whole or
+// not at all (atomic_folder.h). Throws InputError for options that fail Check(), naming dir when
+// it cannot be used and naming the file when one cannot be written.
 DiLiGenTBall WriteDiLiGenTBall(const std::filesystem::path& dir, const DiLiGenTBallOptions& options);
 
 }  // namespace u3mscan::synthetic

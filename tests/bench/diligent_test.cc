@@ -80,6 +80,9 @@ TEST(DiLiGenT, TheSyntheticBallReadsBackAsWritten) {
   // The centre pixel of the ball faces the camera; every observation off the mask is out of view.
   EXPECT_NEAR(object.true_normal.at(2, 37, 37), 1.0, 1e-3);
   EXPECT_EQ(object.stack.observations[0].flags[0] & kOutOfView, kOutOfView);
+  // The folder is written whole or not at all: a second ball is not written over the first.
+  EXPECT_THROW(synthetic::WriteDiLiGenTBall(dir / "ballPNG", SmallBall()), InputError);
+  EXPECT_EQ(ReadDiLiGenTObject(dir / "ballPNG").stack.lights.size(), 24u);
 }
 
 TEST(DiLiGenT, TheRobustBurleySolveRecoversANoiseFreeDiffuseBall) {
