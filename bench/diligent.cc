@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/text_file.h"
+#include "core/units.h"
 #include "reconstruction/photometric_stereo.h"
 #include "u3m/image_io.h"
 
@@ -22,7 +23,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
 // An orthographic camera: the view's centre this far above the grid (mm) turns the view
 // direction by less than 1e-4 deg over a 1000 px crop.
 constexpr double kOrthographicDistanceMm = 1e7;
@@ -292,7 +292,7 @@ std::vector<DiLiGenTRun> RunDiLiGenTMethods(const DiLiGenTObject& object) {
         if (result.condition_number.at(0, row, col) >= options.max_condition) ++run.ill_conditioned_pixels;
         Eigen::Vector3d truth, estimate;
         for (int c = 0; c < 3; ++c) truth(c) = object.true_normal.at(c, row, col), estimate(c) = result.normal.at(c, row, col);
-        angles.push_back(static_cast<float>(std::atan2(truth.cross(estimate).norm(), truth.dot(estimate)) * kRadToDeg));
+        angles.push_back(static_cast<float>(RadToDeg(std::atan2(truth.cross(estimate).norm(), truth.dot(estimate)))));
       }
     }
     run.pixels = static_cast<long long>(angles.size());
