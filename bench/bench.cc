@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/issue_targets.h"
 #include "bench/svg_plot.h"
 #include "bench/table_cells.h"
 #include "bench/truth_maps.h"
@@ -385,6 +386,16 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
     finer("plain", "balanced", 3);
     // A 36-megapixel camera over a 15 cm sample: about 1200 dpi, four times 300 dpi maps.
     finer("plain", "balanced", 4);
+    // Every other fabric there too, solved on the camera's grid only (as `process` does by
+    // default): which of the issues' targets that camera meets on each (bench.md, "Against the
+    // issues' targets").
+    for (const auto& scene : BenchFabricScenes()) {
+      if (scene == "plain") continue;
+      BenchCase c{scene, "distant", base, 0, true, "balanced", "", "", "camera-finer", "", ""};
+      c.camera_per_map = 4;
+      c.ps_supersample = 0;
+      add(c);
+    }
   }
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).
   add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", "", ""});
@@ -469,6 +480,8 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       << Fixed(e.base_color_de_mean, 2) << " | " << Fixed(e.height_rmse_percent, 1) << " | " << ParameterCell(r, 0) << " | "
       << ParameterCell(r, 1) << " | " << ParameterCell(r, 3) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " |\n";
   }
+
+  s << IssueTargetsSection(rows);
 
   // Presets: means over the matrix captures that ran with every preset, so each preset is
   // averaged over the same scenes.

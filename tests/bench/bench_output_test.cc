@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "bench/bench.h"
+#include "bench/issue_targets.h"
 #include "bench/svg_plot.h"
 
 namespace u3mscan::bench {
@@ -140,7 +141,7 @@ TEST(BenchWriters, MarkdownAndPlots) {
   options.quick = true;
   WriteBenchMarkdown(rows, options, dir / "bench.md");
   const std::string md = ReadText(dir / "bench.md");
-  for (const char* heading : {"## Every run", "## Presets", "## Methods on the same capture", "## Scenes that need less"}) {
+  for (const char* heading : {"## Every run", "## Against the issues' targets", "## Presets", "## Methods on the same capture", "## Scenes that need less"}) {
     EXPECT_NE(md.find(heading), std::string::npos) << heading;
   }
   EXPECT_NE(md.find("failed: exit 2"), std::string::npos);
@@ -149,6 +150,40 @@ TEST(BenchWriters, MarkdownAndPlots) {
     EXPECT_TRUE(ParsesAsXml(dir / plot)) << plot;
   }
   fs::remove_all(dir);
+}
+
+// One row per judged run, each figure marked against the issues' limit for its scene.
+TEST(IssueTargets, EachFigureIsMarkedAgainstItsLimitAndTheRowCountsWhatItMeets) {
+  BenchRow plain;
+  plain.c = {"plain", "distant", 128, 0, true, "balanced", "", "", "matrix", "", ""};
+  plain.evaluation.normal_mean_deg = 1.5;          // over plain's 1 deg
+  plain.evaluation.base_color_de_mean = 0.5;       // under 1.5
+  plain.evaluation.height_rmse_percent = 8.0;      // unlevelled: not the figure judged
+  plain.evaluation.height_levelled_rmse_percent = 1.2;
+  plain.evaluation.rerender_relative_rmse = 0.05;  // 5 %
+  plain.evaluation.rerender_truth_maps_relative_rmse = 0.07;  // shown, not judged
+  ParameterError roughness{"roughness", "roughness", "map", true, true, 0.5, 0.52, 0.02, 0.02};
+  ParameterError sheen{"sheen", "sheen_value", "not measured", false, true, 0.2, 0.0, NAN, NAN};
+  plain.evaluation.parameters = {roughness, sheen};
+  BenchRow satin = plain;
+  satin.c.scene = "satin";                         // the same 1.5 deg is within satin's 2
+  BenchRow fast = plain;
+  fast.c.preset = "fast";                          // only balanced runs are judged
+  BenchRow methods = plain;
+  methods.c.group = "methods";
+  const std::string md = IssueTargetsSection({plain, satin, fast, methods});
+  EXPECT_NE(md.find("| plain_distant_128_balanced | 1.50 ✗ | 0.50 ✓ | 1.20 ✓ | 0.020 ✓ |  | not measured | 5.00 ✗ |  | 3 of 5 | 7.00 |"),
+            std::string::npos) << md;
+  EXPECT_NE(md.find("| satin_distant_128_balanced | 1.50 ✓ |"), std::string::npos) << md;
+  EXPECT_EQ(md.find("_fast"), std::string::npos) << md;
+  std::size_t plain_rows = 0;
+  for (std::size_t at = md.find("| plain_distant_128_balanced |"); at != std::string::npos;
+       at = md.find("| plain_distant_128_balanced |", at + 1)) {
+    ++plain_rows;
+  }
+  EXPECT_EQ(plain_rows, 1u) << "the methods group's run of the same id is not judged: " << md;
+  EXPECT_DOUBLE_EQ(NormalTargetDeg("velvet_mismatch"), kTargetNormalSatinVelvetDeg);
+  EXPECT_DOUBLE_EQ(NormalTargetDeg("twill"), kTargetNormalDeg);
 }
 
 TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
@@ -195,13 +230,15 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   options.quick = false;
   const auto full = BenchMatrix(options);
   EXPECT_GT(full.size(), cases.size());
-  // The full matrix has the camera at 4x (the largest --ps-supersample), solved on its own grid.
-  EXPECT_EQ(std::count_if(full.begin(), full.end(),
-                          [](const BenchCase& c) {
-                            return c.group == "camera-finer" && c.camera_per_map == 4 && c.ps_supersample == 0;
-                          }),
-            2)
-      << "plain at 4x on the camera's grid, levelled by a plane and by a quadratic";
+  // The full matrix has the camera at 4x (the largest --ps-supersample), solved on its own grid:
+  // plain levelled by a plane and by a quadratic, every other fabric by a plane.
+  std::multiset<std::string> at_4x;
+  for (const BenchCase& c : full) {
+    if (c.group == "camera-finer" && c.camera_per_map == 4 && c.ps_supersample == 0) at_4x.insert(c.scene);
+  }
+  for (const auto& scene : BenchFabricScenes()) {
+    EXPECT_EQ(at_4x.count(scene), scene == "plain" ? 2u : 1u) << scene;
+  }
   // And that 4x plain with lights held out, its maps at 300 dpi and at the camera's 1200.
   std::set<std::string> held_out_at_4x;
   for (const BenchCase& c : full) {

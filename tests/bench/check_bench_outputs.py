@@ -4,6 +4,7 @@ columns and one ok row per case of the quick matrix, bench.md with its tables, f
 parse as XML; then runs `u3mscan evaluate` (second argument: the executable) on one kept run."""
 import csv
 import json
+import re
 import subprocess
 import sys
 import xml.dom.minidom
@@ -95,16 +96,22 @@ def main():
     mismatch = [r for r in records if r["group"] == "model-mismatch"]
     if [r["scene"] for r in mismatch] != ["velvet_mismatch"]:
         fail(f"one model-mismatch run (velvet_mismatch) expected: {mismatch}")
-    md = (out / "bench.md").read_text()
+    md = (out / "bench.md").read_text(encoding="utf-8")
     # Its row in the mismatch table, beside the Principled velvet of the same rig and preset.
     if "| velvet_mismatch_distant_48 | fast |" not in md or "velvet_distant_48_fast" not in {
             r["scene"] + "_" + r["rig"] + "_" + r["size_px"] + "_" + r["preset"] for r in records}:
         fail("bench.md lacks the model-mismatch row or its Principled velvet run")
     for heading in ("## Every run", "## Presets", "## Methods on the same capture",
                     "### Fit: clusters vs per-pixel", "## Held-out photographs", "## Camera finer than the maps",
-                    "## Scenes that need less", "## Model mismatch"):
+                    "## Scenes that need less", "## Model mismatch", "## Against the issues' targets"):
         if heading not in md:
             fail(f"bench.md lacks {heading}")
+    # The plain balanced matrix run judged against the issues' limits: marked figures and their count.
+    targets = md.split("## Against the issues' targets")[1].split("\n## ")[0]
+    judged = [line for line in targets.splitlines() if line.startswith("| plain_distant_48_balanced |")]
+    if (len(judged) != 1 or not re.search(r"\| \d+ of [1-9]\d* \| [^|]+ \|$", judged[0])
+            or ("✓" not in judged[0] and "✗" not in judged[0])):
+        fail(f"the targets table lacks the judged plain_distant_48_balanced run: {judged}")
     for plot in PLOTS:
         document = xml.dom.minidom.parse(str(out / plot))
         if document.documentElement.tagName != "svg":
