@@ -386,15 +386,17 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
     finer("plain", "balanced", 3);
     // A 36-megapixel camera over a 15 cm sample: about 1200 dpi, four times 300 dpi maps.
     finer("plain", "balanced", 4);
-    // Every other fabric there too, solved on the camera's grid only (as `process` does by
-    // default): which of the issues' targets that camera meets on each (bench.md, "Against the
-    // issues' targets").
+    // Every fabric there on both rigs (plain/distant above), solved on the camera's grid only (as
+    // `process` does by default): which of the issues' targets that camera meets on each
+    // (bench.md, "Against the issues' targets").
     for (const auto& scene : BenchFabricScenes()) {
-      if (scene == "plain") continue;
-      BenchCase c{scene, "distant", base, 0, true, "balanced", "", "", "camera-finer", "", ""};
-      c.camera_per_map = 4;
-      c.ps_supersample = 0;
-      add(c);
+      for (const char* rig : {"distant", "near"}) {
+        if (scene == "plain" && std::string(rig) == "distant") continue;
+        BenchCase c{scene, rig, base, 0, true, "balanced", "", "", "camera-finer", "", ""};
+        c.camera_per_map = 4;
+        c.ps_supersample = 0;
+        add(c);
+      }
     }
   }
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).

@@ -231,13 +231,14 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   const auto full = BenchMatrix(options);
   EXPECT_GT(full.size(), cases.size());
   // The full matrix has the camera at 4x (the largest --ps-supersample), solved on its own grid:
-  // plain levelled by a plane and by a quadratic, every other fabric by a plane.
+  // every fabric on both rigs, plain/distant levelled by a plane and by a quadratic.
   std::multiset<std::string> at_4x;
   for (const BenchCase& c : full) {
-    if (c.group == "camera-finer" && c.camera_per_map == 4 && c.ps_supersample == 0) at_4x.insert(c.scene);
+    if (c.group == "camera-finer" && c.camera_per_map == 4 && c.ps_supersample == 0) at_4x.insert(c.scene + "/" + c.rig);
   }
   for (const auto& scene : BenchFabricScenes()) {
-    EXPECT_EQ(at_4x.count(scene), scene == "plain" ? 2u : 1u) << scene;
+    EXPECT_EQ(at_4x.count(scene + "/distant"), scene == "plain" ? 2u : 1u) << scene;
+    EXPECT_EQ(at_4x.count(scene + "/near"), 1u) << scene;
   }
   // And that 4x plain with lights held out, its maps at 300 dpi and at the camera's 1200.
   std::set<std::string> held_out_at_4x;
