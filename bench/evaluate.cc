@@ -186,6 +186,7 @@ Evaluation Evaluate(const fs::path& output_dir, const fs::path& truth_dir, const
   }
   Image estimate_maps[kParameterCount];
   Evaluation ev;
+  ev.scene = truth.scene;
   ev.side = options.side;
   ev.width = w;
   ev.height = h;
@@ -496,7 +497,8 @@ json EvaluationToJson(const Evaluation& ev) {
                           {"reliable", p.reliable}, {"truth_mean", Number(p.truth_mean)}, {"estimate_mean", Number(p.estimate_mean)},
                           {"mean_abs_error", Number(p.mean_abs_error)}, {"bias", Number(p.bias)}});
   }
-  return {{"side", ev.side},
+  return {{"scene", ev.scene},
+          {"side", ev.side},
           {"grid", {{"width", ev.width}, {"height", ev.height}}},
           {"pixels_compared", ev.pixels_compared},
           {"normal_error_deg", {{"mean", Number(ev.normal_mean_deg)}, {"median", Number(ev.normal_median_deg)}, {"p95", Number(ev.normal_p95_deg)}}},

@@ -45,6 +45,7 @@ struct ParameterError {
 };
 
 struct Evaluation {
+  std::string scene;  // truth.json /scene (the synthetic scene's name; "" when absent)
   std::string side;
   int width = 0, height = 0;       // output grid
   long long pixels_compared = 0;

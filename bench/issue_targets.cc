@@ -1,31 +1,25 @@
 #include "bench/issue_targets.h"
 
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 
+#include "bench/bench.h"
 #include "bench/table_cells.h"
 
 namespace u3mscan::bench {
 namespace {
 
-// A figure against its limit: the figure and a check or a cross; counts into `met` / `judged`.
-struct Tally {
-  int met = 0, judged = 0;
-  std::string Cell(double value, double limit, int digits) {
-    if (!std::isfinite(value)) return "";
-    ++judged;
-    const bool ok = value < limit;
-    met += ok;
-    return Fixed(value, digits) + (ok ? " ✓" : " ✗");
+// A parameter's mean absolute error against its limit; not measured: judged neither way.
+TargetCheck ParameterCheck(const Evaluation& e, const std::string& name, double limit) {
+  TargetCheck check{name + " err", std::numeric_limits<double>::quiet_NaN(), limit, false, 3};
+  for (const ParameterError& p : e.parameters) {
+    if (p.name != name) continue;
+    check.not_measured = !p.measured;
+    if (p.measured) check.value = p.mean_abs_error;
   }
-  std::string ParameterCell(const BenchRow& row, const std::string& name, double limit) {
-    for (const ParameterError& p : row.evaluation.parameters) {
-      if (p.name != name) continue;
-      return p.measured ? Cell(p.mean_abs_error, limit, 3) : "not measured";
-    }
-    return "";
-  }
-};
+  return check;
+}
 
 bool JudgedAgainstTheTargets(const BenchRow& r) {
   const std::string& g = r.c.group;
@@ -38,6 +32,59 @@ bool JudgedAgainstTheTargets(const BenchRow& r) {
 double NormalTargetDeg(const std::string& scene) {
   const bool satin_or_velvet = scene.rfind("satin", 0) == 0 || scene.rfind("velvet", 0) == 0;
   return satin_or_velvet ? kTargetNormalSatinVelvetDeg : kTargetNormalDeg;
+}
+
+bool TargetCheck::Judged() const { return !not_measured && std::isfinite(value); }
+bool TargetCheck::Met() const { return Judged() && value < limit; }
+
+std::vector<TargetCheck> CheckAgainstTheTargets(const Evaluation& e, double held_out_rmse) {
+  const double height =
+      std::isfinite(e.height_levelled_rmse_percent) ? e.height_levelled_rmse_percent : e.height_rmse_percent;
+  return {{"normal mean deg", e.normal_mean_deg, NormalTargetDeg(e.scene)},
+          {"base dE", e.base_color_de_mean, kTargetColourDe},
+          {"height %", height, kTargetHeightPercent},
+          ParameterCheck(e, "roughness", kTargetRoughness),
+          ParameterCheck(e, "specular", kTargetSpecular),
+          ParameterCheck(e, "sheen", kTargetSheen),
+          {"re-render %", 100.0 * e.rerender_relative_rmse, kTargetRerenderPercent},
+          {"held-out photographs %", 100.0 * held_out_rmse, kTargetRerenderPercent}};
+}
+
+std::string TargetCell(const TargetCheck& check) {
+  if (check.not_measured) return "not measured";
+  if (!check.Judged()) return "";
+  return Fixed(check.value, check.digits) + (check.Met() ? " ✓" : " ✗");
+}
+
+std::string TargetsToText(const std::vector<TargetCheck>& checks, const std::string& scene) {
+  int met = 0, judged = 0;
+  std::ostringstream lines;
+  for (const TargetCheck& check : checks) {
+    judged += check.Judged();
+    met += check.Met();
+    const std::string cell = TargetCell(check);
+    if (cell.empty()) continue;
+    lines << "  " << std::left << std::setw(24) << check.figure << std::right << cell;
+    if (!check.not_measured) lines << "  (limit " << Fixed(check.limit, check.digits) << ")";
+    lines << "\n";
+  }
+  std::ostringstream s;
+  s << "issues' targets (scene " << (scene.empty() ? "unnamed" : scene) << ", docs/bench.md): " << met << " of " << judged
+    << " met\n"
+    << lines.str();
+  return s.str();
+}
+
+nlohmann::json TargetsToJson(const std::vector<TargetCheck>& checks) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const TargetCheck& check : checks) {
+    out.push_back({{"figure", check.figure},
+                   {"value", std::isfinite(check.value) ? nlohmann::json(check.value) : nlohmann::json()},
+                   {"limit", check.limit},
+                   {"not_measured", check.not_measured},
+                   {"met", check.Judged() ? nlohmann::json(check.Met()) : nlohmann::json()}});
+  }
+  return out;
 }
 
 std::string IssueTargetsSection(const std::vector<BenchRow>& rows) {
@@ -55,17 +102,15 @@ std::string IssueTargetsSection(const std::vector<BenchRow>& rows) {
        "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (!JudgedAgainstTheTargets(r)) continue;
-    const Evaluation& e = r.evaluation;
-    const double height =
-        std::isfinite(e.height_levelled_rmse_percent) ? e.height_levelled_rmse_percent : e.height_rmse_percent;
-    Tally t;
-    s << "| " << r.c.RunId() << " | " << t.Cell(e.normal_mean_deg, NormalTargetDeg(r.c.scene), 2) << " | "
-      << t.Cell(e.base_color_de_mean, kTargetColourDe, 2) << " | " << t.Cell(height, kTargetHeightPercent, 2) << " | "
-      << t.ParameterCell(r, "roughness", kTargetRoughness) << " | " << t.ParameterCell(r, "specular", kTargetSpecular)
-      << " | " << t.ParameterCell(r, "sheen", kTargetSheen) << " | " << t.Cell(100.0 * e.rerender_relative_rmse, kTargetRerenderPercent, 2) << " | "
-      << t.Cell(100.0 * r.held_out_rmse, kTargetRerenderPercent, 2) << " | " << t.met << " of " << t.judged << " | "
-      << (e.rerender_truth_maps_relative_rmse > 0.0 ? Fixed(100.0 * e.rerender_truth_maps_relative_rmse, 2) : "-")
-      << " |\n";
+    int met = 0, judged = 0;
+    s << "| " << r.c.RunId() << " | ";
+    for (const TargetCheck& check : CheckAgainstTheTargets(r.evaluation, r.held_out_rmse)) {
+      s << TargetCell(check) << " | ";
+      judged += check.Judged();
+      met += check.Met();
+    }
+    const double truth_maps = r.evaluation.rerender_truth_maps_relative_rmse;
+    s << met << " of " << judged << " | " << (truth_maps > 0.0 ? Fixed(100.0 * truth_maps, 2) : "-") << " |\n";
   }
   return s.str();
 }

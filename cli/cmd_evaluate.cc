@@ -1,13 +1,14 @@
 // `u3mscan evaluate OUTPUT TRUTH`: the synthetic round-trip check. Compares a processed output
 // (`u3mscan process --debug-maps`) with the truth/ folder of a synthetic capture and prints every
-// error figure (bench/evaluate.h, docs/bench.md).
-#include <filesystem>
-#include <fstream>
+// error figure (bench/evaluate.h, docs/bench.md), then which of the issues' targets they meet
+// (bench/issue_targets.h).
 #include <iostream>
 
 #include "bench/evaluate.h"
+#include "bench/issue_targets.h"
 #include "cli/command.h"
 #include "core/error.h"
+#include "core/text_file.h"
 
 namespace u3mscan::cli {
 namespace {
@@ -17,7 +18,8 @@ struct EvaluateArgs {
   bench::EvaluateOptions options;
 };
 
-U3MSCAN_REGISTER_COMMAND(kEvaluateCommand, "evaluate", "Errors of a processed synthetic capture against its truth", 60,
+U3MSCAN_REGISTER_COMMAND(kEvaluateCommand, "evaluate",
+                         "Errors of a processed synthetic capture against its truth, and which of the issues' targets they meet", 60,
                          [](CLI::App& sub) {
   auto args = std::make_shared<EvaluateArgs>();
   sub.add_option("OUTPUT", args->output, "Output folder of `u3mscan process --debug-maps` (report.json, maps/)")->required();
@@ -29,15 +31,12 @@ U3MSCAN_REGISTER_COMMAND(kEvaluateCommand, "evaluate", "Errors of a processed sy
   return std::function<int()>([args] {
     try {
       const bench::Evaluation evaluation = bench::Evaluate(args->output, args->truth, args->options);
-      std::cout << bench::EvaluationToText(evaluation);
+      const auto targets = bench::CheckAgainstTheTargets(evaluation);
+      std::cout << bench::EvaluationToText(evaluation) << bench::TargetsToText(targets, evaluation.scene);
       if (!args->json_file.empty()) {
-        const std::filesystem::path path = args->json_file, temp = path.string() + ".partial";
-        {
-          std::ofstream out(temp);
-          out << bench::EvaluationToJson(evaluation).dump(2) << "\n";
-          if (!out) throw InputError(path.string(), "", "a writable file");
-        }
-        std::filesystem::rename(temp, path);
+        nlohmann::json figures = bench::EvaluationToJson(evaluation);
+        figures["targets"] = bench::TargetsToJson(targets);
+        WriteTextFileAtomically(args->json_file, figures.dump(2) + "\n", "a writable file");
       }
       return kExitOk;
     } catch (const InputError& e) {

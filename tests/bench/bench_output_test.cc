@@ -156,6 +156,7 @@ TEST(BenchWriters, MarkdownAndPlots) {
 TEST(IssueTargets, EachFigureIsMarkedAgainstItsLimitAndTheRowCountsWhatItMeets) {
   BenchRow plain;
   plain.c = {"plain", "distant", 128, 0, true, "balanced", "", "", "matrix", "", ""};
+  plain.evaluation.scene = "plain";                // truth.json's: it sets the normal's limit
   plain.evaluation.normal_mean_deg = 1.5;          // over plain's 1 deg
   plain.evaluation.base_color_de_mean = 0.5;       // under 1.5
   plain.evaluation.height_rmse_percent = 8.0;      // unlevelled: not the figure judged
@@ -166,7 +167,8 @@ TEST(IssueTargets, EachFigureIsMarkedAgainstItsLimitAndTheRowCountsWhatItMeets) 
   ParameterError sheen{"sheen", "sheen_value", "not measured", false, true, 0.2, 0.0, NAN, NAN};
   plain.evaluation.parameters = {roughness, sheen};
   BenchRow satin = plain;
-  satin.c.scene = "satin";                         // the same 1.5 deg is within satin's 2
+  satin.c.scene = "satin";
+  satin.evaluation.scene = "satin";                // the same 1.5 deg is within satin's 2
   BenchRow fast = plain;
   fast.c.preset = "fast";                          // only balanced runs are judged
   BenchRow methods = plain;
@@ -182,6 +184,14 @@ TEST(IssueTargets, EachFigureIsMarkedAgainstItsLimitAndTheRowCountsWhatItMeets) 
     ++plain_rows;
   }
   EXPECT_EQ(plain_rows, 1u) << "the methods group's run of the same id is not judged: " << md;
+  // The same verdicts for `u3mscan evaluate`: the sheen left out is judged neither way.
+  const nlohmann::json checks = TargetsToJson(CheckAgainstTheTargets(plain.evaluation));
+  ASSERT_EQ(checks.size(), 8u);
+  EXPECT_EQ(checks[5]["figure"], "sheen err");
+  EXPECT_TRUE(checks[5]["not_measured"].get<bool>());
+  EXPECT_TRUE(checks[5]["met"].is_null());
+  EXPECT_TRUE(checks[7]["value"].is_null()) << "no held-out photographs given";
+  EXPECT_EQ(checks[3]["met"], true);
   EXPECT_DOUBLE_EQ(NormalTargetDeg("velvet_mismatch"), kTargetNormalSatinVelvetDeg);
   EXPECT_DOUBLE_EQ(NormalTargetDeg("twill"), kTargetNormalDeg);
 }

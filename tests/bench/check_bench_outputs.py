@@ -126,10 +126,16 @@ def main():
                             capture_output=True, text=True)
     if result.returncode != 0:
         fail(f"evaluate exit {result.returncode}: {result.stderr}")
-    for text in ("normal angular error", "albedo CIEDE2000", "height RMSE", "roughness", "re-render"):
+    for text in ("normal angular error", "albedo CIEDE2000", "height RMSE", "roughness", "re-render",
+                 "issues' targets (scene plain"):
         if text not in result.stdout:
             fail(f"evaluate did not print {text!r}: {result.stdout}")
     figures = json.loads((out / "evaluate.json").read_text())
+    # The targets judged from the same figures: the normal against plain's 1 deg limit.
+    normal_check = next((t for t in figures.get("targets", []) if t["figure"] == "normal mean deg"), None)
+    if (figures.get("scene") != "plain" or normal_check is None or normal_check["limit"] != 1.0
+            or normal_check["met"] != (figures["normal_error_deg"]["mean"] < 1.0)):
+        fail(f"evaluate.json lacks the scene or the normal's verdict: {figures.get('scene')}, {normal_check}")
     row = next(r for r in records if r["group"] == "matrix" and r["rig"] == "distant" and r["preset"] == "fast")
     if abs(figures["normal_error_deg"]["mean"] - float(row["normal_mean_deg"])) > 1e-3:
         fail("evaluate and bench disagree on the normal error")

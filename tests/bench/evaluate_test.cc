@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/evaluate.h"
+#include "bench/issue_targets.h"
 #include "bench/truth_maps.h"
 #include "core/error.h"
 #include "datasets_synthetic/truth_writer.h"
@@ -139,6 +140,15 @@ TEST_F(EvaluateTest, OutputEqualToTruthHasZeroErrors) {
   EXPECT_LT(e.rerender_relative_rmse, kConstantSpecularRerender);
   // On the truth's own grid the truth's maps render as the truth: nothing below the fit's figure.
   EXPECT_EQ(e.rerender_truth_maps_relative_rmse, 0.0);
+  // The truth itself meets the issues' targets on every figure the evaluation judges.
+  EXPECT_EQ(e.scene, "plain");
+  for (const TargetCheck& check : CheckAgainstTheTargets(e)) {
+    if (check.figure == "held-out photographs %") {
+      EXPECT_FALSE(check.Judged()) << "evaluate alone has no held-out photographs";
+    } else {
+      EXPECT_TRUE(check.Met()) << check.figure << " " << check.value << " against " << check.limit;
+    }
+  }
 }
 
 TEST_F(EvaluateTest, MeasuresKnownPerturbations) {
@@ -155,6 +165,14 @@ TEST_F(EvaluateTest, MeasuresKnownPerturbations) {
   EXPECT_EQ(e.parameters[1].source, "constant");
   EXPECT_NEAR(e.parameters[1].bias, 0.0, kShiftTolerance);
   EXPECT_GT(e.rerender_relative_rmse, 0.01);  // rotated normals and rougher material render differently
+  // The rotation is over plain's 1 deg limit; the verdicts say so, in text and JSON.
+  ASSERT_GT(kRotationDeg, kTargetNormalDeg);
+  const auto checks = CheckAgainstTheTargets(e);
+  ASSERT_EQ(checks.front().figure, "normal mean deg");
+  EXPECT_TRUE(checks.front().Judged());
+  EXPECT_FALSE(checks.front().Met());
+  EXPECT_NE(TargetsToText(checks, e.scene).find("issues' targets (scene plain"), std::string::npos);
+  EXPECT_EQ(TargetsToJson(checks)[0]["met"], false);
 }
 
 TEST_F(EvaluateTest, NotMeasuredParametersAreNotErrors) {
