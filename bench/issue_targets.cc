@@ -21,6 +21,19 @@ TargetCheck ParameterCheck(const Evaluation& e, const std::string& name, double 
   return check;
 }
 
+// How many of the checks are judged, and how many of those meet their target.
+struct MetCount {
+  int met = 0, judged = 0;
+};
+MetCount CountMet(const std::vector<TargetCheck>& checks) {
+  MetCount count;
+  for (const TargetCheck& check : checks) {
+    count.judged += check.Judged();
+    count.met += check.Met();
+  }
+  return count;
+}
+
 bool JudgedAgainstTheTargets(const BenchRow& r) {
   const std::string& g = r.c.group;
   return r.status == "ok" && r.c.preset == "balanced" &&
@@ -57,21 +70,17 @@ std::string TargetCell(const TargetCheck& check) {
 }
 
 std::string TargetsToText(const std::vector<TargetCheck>& checks, const std::string& scene) {
-  int met = 0, judged = 0;
-  std::ostringstream lines;
+  std::ostringstream s;
+  const MetCount count = CountMet(checks);
+  s << "issues' targets (scene " << (scene.empty() ? "unnamed" : scene) << ", docs/bench.md): " << count.met << " of "
+    << count.judged << " met\n";
   for (const TargetCheck& check : checks) {
-    judged += check.Judged();
-    met += check.Met();
     const std::string cell = TargetCell(check);
     if (cell.empty()) continue;
-    lines << "  " << std::left << std::setw(24) << check.figure << std::right << cell;
-    if (!check.not_measured) lines << "  (limit " << Fixed(check.limit, check.digits) << ")";
-    lines << "\n";
+    s << "  " << std::left << std::setw(24) << check.figure << std::right << cell;
+    if (!check.not_measured) s << "  (limit " << Fixed(check.limit, check.digits) << ")";
+    s << "\n";
   }
-  std::ostringstream s;
-  s << "issues' targets (scene " << (scene.empty() ? "unnamed" : scene) << ", docs/bench.md): " << met << " of " << judged
-    << " met\n"
-    << lines.str();
   return s.str();
 }
 
@@ -102,15 +111,12 @@ std::string IssueTargetsSection(const std::vector<BenchRow>& rows) {
        "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (!JudgedAgainstTheTargets(r)) continue;
-    int met = 0, judged = 0;
+    const std::vector<TargetCheck> checks = CheckAgainstTheTargets(r.evaluation, r.held_out_rmse);
     s << "| " << r.c.RunId() << " | ";
-    for (const TargetCheck& check : CheckAgainstTheTargets(r.evaluation, r.held_out_rmse)) {
-      s << TargetCell(check) << " | ";
-      judged += check.Judged();
-      met += check.Met();
-    }
+    for (const TargetCheck& check : checks) s << TargetCell(check) << " | ";
+    const MetCount count = CountMet(checks);
     const double truth_maps = r.evaluation.rerender_truth_maps_relative_rmse;
-    s << met << " of " << judged << " | " << (truth_maps > 0.0 ? Fixed(100.0 * truth_maps, 2) : "-") << " |\n";
+    s << count.met << " of " << count.judged << " | " << (truth_maps > 0.0 ? Fixed(100.0 * truth_maps, 2) : "-") << " |\n";
   }
   return s.str();
 }
