@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -16,18 +15,12 @@
 #include "bench/bench.h"
 #include "bench/issue_targets.h"
 #include "bench/svg_plot.h"
+#include "tests/support/temp_dir.h"
 
 namespace u3mscan::bench {
 namespace {
 
 namespace fs = std::filesystem;
-
-fs::path TempDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("u3mscan_bench_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 // True when the system python's minidom parses the file (an independent XML parser).
 bool ParsesAsXml(const fs::path& path) {
@@ -76,7 +69,8 @@ std::vector<BenchRow> FakeRows() {
 }
 
 TEST(SvgPlot, OutputParsesAsXmlAndEscapesText) {
-  const fs::path dir = TempDir("svg");
+  const test::TempDir temp;  // removed however the test ends
+  const fs::path& dir = temp.path();
   PlotSpec spec{"Error <&> \"time\"", "run time (s)", "error 'deg'"};
   spec.log_x = true;
   std::vector<PlotSeries> series(2);
@@ -96,20 +90,20 @@ TEST(SvgPlot, OutputParsesAsXmlAndEscapesText) {
   // A broken document must fail the check (so the check can fail).
   std::ofstream(dir / "broken.svg") << "<svg><g></svg>";
   EXPECT_FALSE(ParsesAsXml(dir / "broken.svg"));
-  fs::remove_all(dir);
 }
 
 TEST(SvgPlot, EmptyAndSinglePointPlotsAreValid) {
-  const fs::path dir = TempDir("svg_empty");
+  const test::TempDir temp;  // removed however the test ends
+  const fs::path& dir = temp.path();
   WriteScatterPlotSvg(PlotSpec{"empty", "x", "y"}, {}, dir / "empty.svg");
   WriteScatterPlotSvg(PlotSpec{"one", "x", "y"}, {PlotSeries{"s", {{1.0, 1.0, "p"}}, false}}, dir / "one.svg");
   EXPECT_TRUE(ParsesAsXml(dir / "empty.svg"));
   EXPECT_TRUE(ParsesAsXml(dir / "one.svg"));
-  fs::remove_all(dir);
 }
 
 TEST(BenchWriters, CsvHasTheColumnsOnEveryRow) {
-  const fs::path dir = TempDir("csv");
+  const test::TempDir temp;  // removed however the test ends
+  const fs::path& dir = temp.path();
   const auto rows = FakeRows();
   WriteBenchCsv(rows, dir / "bench.csv");
   std::ifstream in(dir / "bench.csv");
@@ -131,11 +125,11 @@ TEST(BenchWriters, CsvHasTheColumnsOnEveryRow) {
     EXPECT_EQ(cells, static_cast<int>(BenchCsvColumns().size())) << line;
   }
   EXPECT_EQ(lines, static_cast<int>(rows.size()));
-  fs::remove_all(dir);
 }
 
 TEST(BenchWriters, MarkdownAndPlots) {
-  const fs::path dir = TempDir("md");
+  const test::TempDir temp;  // removed however the test ends
+  const fs::path& dir = temp.path();
   const auto rows = FakeRows();
   BenchOptions options;
   options.quick = true;
@@ -149,7 +143,6 @@ TEST(BenchWriters, MarkdownAndPlots) {
   for (const char* plot : {"error_vs_time.svg", "rerender_vs_time.svg", "time_vs_megapixels.svg", "time_vs_lights.svg"}) {
     EXPECT_TRUE(ParsesAsXml(dir / plot)) << plot;
   }
-  fs::remove_all(dir);
 }
 
 // One row per judged run, each figure marked against the issues' limit for its scene.
