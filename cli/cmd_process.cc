@@ -78,6 +78,10 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "With --ps-supersample: average each fine pixel onto the maps where its camera ray met the grid, not "
                "where its surface point lies in plan (for comparisons; docs/reconstruction.md, Placing the fine "
                "pixels on the plan)");
+  sub.add_flag("--follow-fibres", args->options.follow_fibres,
+               "Turn the anisotropic stretch per pixel along the fibres the normals show (a lace's cord round its "
+               "motif, a satin's floats), each cluster's rotation fitted on top; the rotation is then a texture "
+               "(docs/fitting.md, Fibre directions from the relief)");
   sub.add_option("--level", args->options.levelling,
                  "The sample's low-order shape taken out of the height map: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "

@@ -181,19 +181,13 @@ SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& fr
   return outcome;
 }
 
-// `deg` in [0, 180): the anisotropic stretch is the same along t and -t.
-double WrapHalfTurn(double deg) {
-  const double r = std::fmod(deg, 180.0);
-  return r < 0.0 ? r + 180.0 : r;
-}
-
 // Turns every sample's tangent by `turn_deg` further about its normal (rotation_deg grows by it).
 void TurnSamples(ClusterSamples& samples, double turn_deg) {
   for (LocalObservation& o : samples.observations) {
     o.light_local = TurnTangent(o.light_local, turn_deg);
     o.view_local = TurnTangent(o.view_local, turn_deg);
   }
-  samples.rotation_deg = WrapHalfTurn(samples.rotation_deg + turn_deg);
+  samples.rotation_deg = WrapHalfTurnDeg(samples.rotation_deg + turn_deg);
 }
 
 // The anisotropy rotation search of FitOptions::fit_anisotropy_rotation (steps at kRotationScanSteps
@@ -207,7 +201,7 @@ double SearchAnisotropyRotation(ClusterSamples& samples, const ParameterMask& fr
   auto vertex = [](double turn, double step, double below, double at, double above) {
     const double curvature = below - 2.0 * at + above;
     if (!(curvature > 0.0) || !std::isfinite(curvature)) return turn;
-    return WrapHalfTurn(turn + std::clamp(0.5 * step * (below - above) / curvature, -step, step));
+    return WrapHalfTurnDeg(turn + std::clamp(0.5 * step * (below - above) / curvature, -step, step));
   };
   // Cost of `p` with the samples turned by `turn` (a copy; the samples stay as they are).
   ClusterSamples turned;

@@ -91,6 +91,7 @@ void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const F
   check_image(geometry.normals, 3, "normals", false);
   check_image(geometry.albedo, 3, "albedo", true);
   check_image(geometry.height_mm, 1, "height_mm", true);
+  check_image(geometry.fibre_turn_deg, 1, "fibre_turn_deg", true);
   if (stack.observations.empty()) fail("stack has no observations");
   for (std::size_t i = 0; i < stack.observations.size(); ++i) {
     const Observation& o = stack.observations[i];
@@ -122,6 +123,14 @@ struct WorldObservation {
   Eigen::Vector3d rgb;          // measurement, linear RGB
   Eigen::Vector3d weight;       // 1 / sigma per channel
 };
+
+// The pixel's own turn of the tangent (degrees, SurfaceGeometry::fibre_turn_deg), 0 without one.
+double PixelTurn(const FitContext& context, std::size_t index) {
+  const Image& turns = context.geometry->fibre_turn_deg;
+  if (turns.empty()) return 0.0;
+  const double turn = turns.plane(0)[index];
+  return std::isfinite(turn) ? turn : 0.0;
+}
 
 // The pixel's surface point (world, mm): the grid point raised to the reconstruction's height.
 Eigen::Vector3d SurfacePoint(const FitContext& context, int col, int row) {
@@ -179,7 +188,8 @@ int GatherWorldObservations(const FitContext& context, std::size_t index, std::v
 }
 
 // As GatherPixel, with the pixel's normal given (world frame, any length in the valid band) and
-// its tangent turned by `rotation_deg` (the cluster's anisotropy rotation, shading_frame.h).
+// its tangent turned by `rotation_deg` (the cluster's anisotropy rotation, shading_frame.h) on top
+// of the pixel's own turn (PixelTurn).
 int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::Vector3d n, double rotation_deg,
                           LocalObservation* out, float* ratios) {
   const int width = context.stack->grid.width;
@@ -188,7 +198,7 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
   const double length = n.norm();
   if (!(length > kMinNormalLength && length < kMaxNormalLength)) return 0;
   n /= length;
-  const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
+  const ShadingFrame frame = MakeShadingFrame(n, rotation_deg + PixelTurn(context, index));
   const Eigen::Vector3d point = SurfacePoint(context, col, row);
   const double min_cos = context.options->min_cos;
   int count = 0;
@@ -204,7 +214,7 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
 }
 
 // The usable observations of pixel `index` in its reconstruction normal's frame, the tangent
-// unturned; returns their number (at most stack.observations.size(), the size `out` must have).
+// turned by the pixel's own turn only (PixelTurn); returns their number (at most stack.observations.size(), the size `out` must have).
 // Also the reflectance ratios (luminance / (cos_l E)) into `ratios` when non-null.
 int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
   return GatherPixelWithNormal(context, index, GeometryNormal(context, index), 0.0, out, ratios);
@@ -243,9 +253,11 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   const Eigen::Vector3d& b0 = axes.bitangent;
   const int gathered = GatherWorldObservations(context, index, scratch.world);
   const std::span<const WorldObservation> world(scratch.world.data(), gathered);
-  // The observations in the frame of normal `n`; returns their number.
+  // The observations in the frame of normal `n` (the cluster's turn on the pixel's own); returns
+  // their number.
+  const double turn_deg = rotation_deg + PixelTurn(context, index);
   auto localize = [&](const Eigen::Vector3d& n) {
-    const ShadingFrame frame = MakeShadingFrame(n, rotation_deg);
+    const ShadingFrame frame = MakeShadingFrame(n, turn_deg);
     int count = 0;
     for (const WorldObservation& w : world) {
       if (ToLocalObservation(w, frame, options.min_cos, &buffer[count])) ++count;
@@ -830,6 +842,11 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   const FitContext context = MakeContext(band, geometry, options, model.observation_levels);
   const std::size_t n_obs = band.observations.size();
   const Clustering& clustering = model.clustering;
+  // Pixels with their own turns make the rotation a map even where every cluster is unturned.
+  if (!geometry.fibre_turn_deg.empty() && result.anisotropy_rotation_deg.empty()) {
+    result.anisotropy_rotation_deg = Image(result.base_color.width(), result.base_color.height(), 1, 0.0f,
+                                           result.base_color.pitch_mm());
+  }
   const int k = static_cast<int>(model.clusters.size());
   const auto& measured_any = model.measured_any;
   std::vector<ParameterVector> cluster_params(k);
@@ -886,7 +903,8 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
         ++local_fitted;
         const double rotation_deg = model.clusters[c].anisotropy_rotation_deg;
         if (!result.anisotropy_rotation_deg.empty()) {
-          result.anisotropy_rotation_deg.at(0, row0 + row, col) = static_cast<float>(rotation_deg);
+          result.anisotropy_rotation_deg.at(0, row0 + row, col) =
+              static_cast<float>(WrapHalfTurnDeg(rotation_deg + PixelTurn(context, index)));
         }
         if (!refine_normals && rotation_deg != 0.0) {  // the cluster's turned tangent, same observations
           count = GatherPixelWithNormal(context, index, GeometryNormal(context, index), rotation_deg,
@@ -969,6 +987,14 @@ void FinishRotationMap(const FitOptions& options, FitResult* out) {
     if (!c.parameters[kAnisotropic].measured || c.pixel_count == 0) continue;
     if (largest != nullptr && c.anisotropy_rotation_deg != largest->anisotropy_rotation_deg) one_turn = false;
     if (largest == nullptr || c.pixel_count > largest->pixel_count) largest = &c;
+  }
+  // Pixels turned on their own (SurfaceGeometry::fibre_turn_deg) make it a texture.
+  if (one_turn && largest != nullptr && !result.anisotropy_rotation_deg.empty()) {
+    const auto turns = result.anisotropy_rotation_deg.plane(0);
+    const auto ids = result.cluster_id.plane(0);
+    for (std::size_t j = 0; j < turns.size() && one_turn; ++j) {
+      if (ids[j] >= 0.0f && turns[j] != static_cast<float>(largest->anisotropy_rotation_deg)) one_turn = false;
+    }
   }
   if (one_turn || result.anisotropy_rotation_deg.empty()) {
     report.value = largest != nullptr ? largest->anisotropy_rotation_deg : 0.0;

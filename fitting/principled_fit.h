@@ -256,10 +256,15 @@ struct FitResult {
 // The geometry the fit needs beside the Stack (from the reconstruction): normals (3 channels, unit,
 // world frame), albedo (3 channels, linear RGB, any scale; empty: estimated from the data) and
 // height_mm (1 channel; empty: the sample plane z = 0). All on the stack's grid.
+// fibre_turn_deg (1 channel, degrees; empty: none): each pixel's own turn of the tangent about its
+// normal (shading_frame.h), the fibres' direction where the relief shows one
+// (pipeline/fibre_direction.h). A cluster's anisotropy rotation is then fitted on top of it, and
+// the rotation map holds their sum per pixel.
 struct SurfaceGeometry {
   Image normals;
   Image albedo;
   Image height_mm;
+  Image fibre_turn_deg;
 };
 
 // Fits the maps. Throws std::invalid_argument when the inputs do not match (sizes, indices,

@@ -42,6 +42,12 @@ inline ShadingFrame MakeShadingFrame(const Eigen::Vector3d& unit_normal, double 
   return f;
 }
 
+// `deg` in [0, 180): the anisotropic stretch is the same along t and -t.
+inline double WrapHalfTurnDeg(double deg) {
+  const double r = std::fmod(deg, 180.0);
+  return r < 0.0 ? r + 180.0 : r;
+}
+
 // Local coordinates of a direction after the tangent is turned by `rotation_deg` about the normal,
 // from its local coordinates before (the same turn as MakeShadingFrame's, applied to a vector
 // already in the frame).

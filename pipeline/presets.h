@@ -11,6 +11,7 @@
 #include "capture/calibrate.h"
 #include "capture/capture.h"
 #include "fitting/principled_fit.h"
+#include "pipeline/fibre_direction.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
@@ -55,6 +56,12 @@ struct StageOptions {
   // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
   // Off only for comparisons (`process --no-plan-placement`).
   bool place_fine_pixels_on_plan = true;
+  // The fit's shading frame turned per pixel along the fibres that the normals' relief shows
+  // (pipeline/fibre_direction.h, fitting::SurfaceGeometry::fibre_turn_deg), each cluster's
+  // anisotropy rotation fitted on top (`process --follow-fibres`). In one band only: bands fit as
+  // before.
+  bool follow_fibres = false;
+  FibreDirectionOptions fibre_directions;
   // In bands (pipeline/tiled_side.cc), sweeps reuse the solves of earlier sweeps instead of
   // repeating them: with distant lights the marked sweep solves again only the pixels a mark
   // changes (SolvePhotometricStereoAgain, from the first sweep's whole solve: 37 B a fine pixel

@@ -40,6 +40,9 @@ struct ProcessOptions {
   // grid instead of where their surface points lie in plan (StageOptions::place_fine_pixels_on_plan;
   // for comparisons).
   bool no_plan_placement = false;
+  // Turn the fit's shading frame per pixel along the fibres the normals show
+  // (StageOptions::follow_fibres).
+  bool follow_fibres = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
   // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need
   // bands (--max-memory) are refused with them.

@@ -275,12 +275,19 @@ void ReportFitStep(const fitting::FitResult& fit, std::string detail, double sec
   report->steps.push_back({"fit", true, detail, seconds});
 }
 
+fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
+                                     const StageOptions& options) {
+  fitting::SurfaceGeometry surface{normals, albedo, height_mm, Image()};
+  if (options.follow_fibres) surface.fibre_turn_deg = FibreTurnFromNormals(normals, options.fibre_directions);
+  return surface;
+}
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
-  fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                   geometry.height_mm};
+  const fitting::SurfaceGeometry surface = FitGeometry(geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                                      geometry.height_mm, options);
   fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
   ReportFitStep(fit, std::to_string(fit.clusters.size()) + " clusters", SteadySeconds() - start, report);
   return fit;
@@ -310,7 +317,7 @@ Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const Si
   Image residual(w, h, 1, 0.0f, stack.grid.pitch_mm);
   std::vector<float> count(static_cast<std::size_t>(w) * h, 0.0f);
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm};
+                                         geometry.height_mm, Image()};
   const int n = static_cast<int>(stack.observations.size());
   const int used = std::min(n, std::max(1, max_observations));
   for (int k = 0; k < used; ++k) {

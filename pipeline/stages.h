@@ -74,6 +74,11 @@ bool HasPointLights(const Stack& stack);
 void ReportObliqueView(const Stack& stack, RunReport* report);
 void ReportFitStep(const fitting::FitResult& fit, std::string detail, double seconds, RunReport* report);
 
+// The fit's geometry: the given maps, and with options.follow_fibres each pixel's turn along the
+// fibres its normals show (pipeline/fibre_direction.h).
+fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
+                                     const StageOptions& options);
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 

@@ -164,7 +164,7 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
 // The surface the fit and the held-out check see on a band: the reconstruction's rows of it.
 fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows) {
   return {CropRows(geometry.photometric_stereo.normal, row0, rows), CropRows(geometry.photometric_stereo.albedo, row0, rows),
-          CropRows(geometry.height_mm, row0, rows)};
+          CropRows(geometry.height_mm, row0, rows), Image()};
 }
 
 }  // namespace
@@ -652,13 +652,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     } else if (!fine_marks.empty()) {
       mark(fine_marks, fine_grid, band);
     }
-    if (!fine_fit_normal.empty()) return {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image()};
+    if (!fine_fit_normal.empty()) {
+      return {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image()};
+    }
     PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
         *band, ps_options,
         fine_solve_height.empty()
             ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
             : CropRows(fine_solve_height, row0, rows));
-    return {std::move(solved.normal), std::move(solved.albedo), Image()};
+    return {std::move(solved.normal), std::move(solved.albedo), Image(), Image()};
   };
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
@@ -770,6 +772,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     detail += fine_detail + placed;
   }
   ReportFitStep(out.fit, std::move(detail), SteadySeconds() - start, report);
+  if (options.follow_fibres) {
+    report->warnings.push_back(
+        "follow fibres: not done in bands (the structure of the normals is read on one whole grid); each cluster kept "
+        "one anisotropy rotation");
+  }
 
   // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
   start = SteadySeconds();

@@ -996,19 +996,25 @@ TEST_F(PrincipledFitTest, ModelMismatchIsReported) {
 // A stretch turned from the fit's x-axis tangent: the twill preset's anisotropic 0.2 with fibres
 // at `turn_deg` from world +x (90: a warp along y, a probe angle; 30 and 120: between the probes,
 // found by the parabola step), one cluster, noise-free.
-Scene TurnedStretchScene(double turn_deg) {
+// One stretched material (roughness 0.5, specular 0.5) on the overhead rig with fibres at
+// `tangent_deg` per pixel, noise-free.
+Scene StretchedScene(double anisotropic, std::function<double(int col, int row)> tangent_deg) {
   SceneSpec spec;
   spec.lights_deg = OverheadLights();
-  spec.material = [](int, int) {
+  spec.material = [anisotropic](int, int) {
     PrincipledParams<double> p;
     p.base_color = Eigen::Vector3d(0.45, 0.36, 0.22);
     p.roughness = 0.5;
     p.specular = 0.5;
-    p.anisotropic = 0.2;  // the twill preset's
+    p.anisotropic = anisotropic;
     return p;
   };
-  spec.tangent_deg = [turn_deg](int, int) { return turn_deg; };
+  spec.tangent_deg = std::move(tangent_deg);
   return MakeScene(spec);
+}
+
+Scene TurnedStretchScene(double turn_deg) {
+  return StretchedScene(0.2, [turn_deg](int, int) { return turn_deg; });  // the twill preset's stretch
 }
 
 // Angle between two stretch directions (degrees, the stretch repeats every 180).
@@ -1069,6 +1075,65 @@ TEST_F(PrincipledFitTest, StretchAlongTheTangentKeepsTurnZero) {
   EXPECT_TRUE(result.rotation_report.measured);
   EXPECT_EQ(result.rotation_report.value, 0.0);
   EXPECT_EQ(result.clusters[0].anisotropy_rotation_deg, 0.0);
+}
+
+// Fibres that change direction across one cluster (a lace's cord round its motif): the left half
+// at 30 degrees, the right half at 120, one material (anisotropic 0.3), noise-free.
+Scene TwoFibreDirectionsScene() {
+  return StretchedScene(0.3, [width = SceneSpec().width](int col, int) { return col < width / 2 ? 30.0 : 120.0; });
+}
+
+TEST_F(PrincipledFitTest, PixelTurnsLetOneClusterFollowFibresThatChangeDirection) {
+  Scene scene = TwoFibreDirectionsScene();
+  const std::set<int> held_out = {3, 9};
+  const Stack fitted_lights = WithoutLights(scene.stack, held_out);
+  FitOptions options;
+  options.clustering.cluster_count = 1;
+  // Without the pixels' turns one turn cannot serve both halves: the stretch is not recovered.
+  const FitResult one_turn = FitPrincipled(fitted_lights, scene.geometry, options);
+  ExpectFinite(one_turn);
+  const MapReport& one_turn_stretch = one_turn.report(FitParameter::kAnisotropic);
+  EXPECT_FALSE(one_turn_stretch.measured && std::abs(one_turn_stretch.value - 0.3) < kExactParameterTolerance)
+      << "one turn recovered both directions' stretch: the test would not show the pixels' turns";
+
+  // With them (the render's own directions, as pipeline/fibre_direction.h reads them from a relief).
+  scene.geometry.fibre_turn_deg = Image(scene.stack.grid.width, scene.stack.grid.height, 1, 0.0f, scene.stack.grid.pitch_mm);
+  for (int row = 0; row < scene.stack.grid.height; ++row) {
+    for (int col = 0; col < scene.stack.grid.width; ++col) {
+      scene.geometry.fibre_turn_deg.at(0, row, col) = col < scene.stack.grid.width / 2 ? 30.0f : 120.0f;
+    }
+  }
+  const FitResult result = FitPrincipled(fitted_lights, scene.geometry, options);
+  ExpectFinite(result);
+  ASSERT_EQ(result.clusters.size(), 1u);
+  const MapReport& stretch = result.report(FitParameter::kAnisotropic);
+  ASSERT_TRUE(stretch.measured) << stretch.reason;
+  EXPECT_NEAR(stretch.value, 0.3, kExactParameterTolerance);
+  EXPECT_LT(StretchAngleBetween(result.clusters[0].anisotropy_rotation_deg, 0.0), kRotationToleranceDeg)
+      << "the cluster's own turn on top of the pixels' should be none";
+  // The rotation is a texture: each pixel's turn.
+  ASSERT_TRUE(result.rotation_report.measured) << result.rotation_report.reason;
+  EXPECT_FALSE(result.rotation_report.constant);
+  ASSERT_FALSE(result.anisotropy_rotation_deg.empty());
+  for (int row = 0; row < scene.stack.grid.height; ++row) {
+    for (int col = 0; col < scene.stack.grid.width; ++col) {
+      const double expected = col < scene.stack.grid.width / 2 ? 30.0 : 120.0;
+      EXPECT_LT(StretchAngleBetween(result.anisotropy_rotation_deg.at(0, row, col), expected), kRotationToleranceDeg)
+          << "pixel " << col << ", " << row;
+    }
+  }
+  // RenderFitted shades with the rotation map: held-out lights re-render within the 2 %.
+  for (const Observation& o : scene.stack.observations) {
+    if (!held_out.count(o.light)) continue;
+    EXPECT_LT(RelativeRmse(RenderFitted(result, scene.stack, scene.geometry, o), o.rgb), kHeldOutRelativeRmse)
+        << "light " << o.light;
+  }
+}
+
+TEST_F(PrincipledFitTest, PixelTurnsOfTheWrongSizeAreRefused) {
+  Scene scene = TwoFibreDirectionsScene();
+  scene.geometry.fibre_turn_deg = Image(3, 3, 1, 0.0f, scene.stack.grid.pitch_mm);
+  EXPECT_THROW(FitPrincipled(scene.stack, scene.geometry, FitOptions()), std::invalid_argument);
 }
 
 TEST_F(PrincipledFitTest, WithoutTheRotationSearchAStretchAlongYIsNotReportedAsReliableZero) {

@@ -271,5 +271,31 @@ TEST_F(TiledTest, HeldOutLightsInBandsGiveTheOneBandCheck) {
   EXPECT_TRUE(step);
 }
 
+// --follow-fibres reads the normals' structure on one whole grid: a run in bands does not follow
+// the fibres and says so in its warnings; one band follows them and records the option.
+TEST_F(TiledTest, FollowFibresIsRecordedAndBandsSayTheyDoNotFollow) {
+  const fs::path dir = MakeCapture("fibres", /*calibration_frames=*/false, 8);
+  ProcessOptions options;
+  options.preset = Preset::kFast;
+  options.follow_fibres = true;
+  options.debug_maps = true;
+  CaptureJob whole_job{dir, TestRoot() / "fibres_whole", "fibres_whole"};
+  const ProcessResult whole = ProcessCapture(whole_job, options);
+  ASSERT_EQ(whole.report.options["tiles_front"]["bands"], 1);
+  EXPECT_EQ(whole.report.options["follow_fibres"], true);
+  auto says_not_in_bands = [](const RunReport& report) {
+    for (const std::string& w : report.warnings) {
+      if (w.find("follow fibres: not done in bands") != std::string::npos) return true;
+    }
+    return false;
+  };
+  EXPECT_FALSE(says_not_in_bands(whole.report));
+  options.max_memory_gib = whole.report.options["tiles_front"]["stack_gib"].get<double>() / 2.5;
+  CaptureJob tiled_job{dir, TestRoot() / "fibres_tiled", "fibres_tiled"};
+  const ProcessResult tiled = ProcessCapture(tiled_job, options);
+  ASSERT_GT(tiled.report.options["tiles_front"]["bands"].get<int>(), 1);
+  EXPECT_TRUE(says_not_in_bands(tiled.report));
+}
+
 }  // namespace
 }  // namespace u3mscan

@@ -1,0 +1,42 @@
+#pragma once
+// The fibres' direction per pixel, read from the relief: along a yarn, a cord or a float the
+// surface normal barely changes; across it, it turns over the yarn's rounded cross-section. The
+// structure tensor of the normal field (the sum over the normal's three components of the outer
+// product of their gradients, averaged over a Gaussian window) has its largest eigenvector across
+// the yarn; the fibres run along the other one. A lace's gimp cord turns all the way round a motif
+// and a satin's floats change direction from weave to weave: one anisotropy rotation per cluster
+// cannot follow them, a turn per pixel can (docs/fitting.md, "Fibre directions from the relief").
+//
+// The turn is given as the fitting's shading frame takes it (shading_frame.h): degrees about the
+// pixel's normal from the unturned tangent (world +x projected into the tangent plane), in
+// [0, 180), so that MakeShadingFrame(n, turn) has its tangent along the fibres' direction
+// projected into the tangent plane.
+
+#include "core/image.h"
+
+namespace u3mscan {
+
+struct FibreDirectionOptions {
+  // Standard deviation of the Gaussian window the structure tensor is averaged over, in pixels of
+  // the normal map. About a quarter of the narrowest yarn's width: the net threads of the synthetic
+  // lace are 0.18 mm wide, 10 px at 1500 dpi.
+  double window_px = 1.5;
+  // Below this coherence ((l1 - l2) / (l1 + l2) of the tensor's eigenvalues, 0 for a field that
+  // turns as much one way as the other, 1 for a perfect cylinder) the pixel has no fibre direction
+  // and keeps the unturned tangent (turn 0).
+  double min_coherence = 0.5;
+  // Pixels whose tensor is below this trace (the sum of squared normal gradients per pixel^2: a
+  // flat region) have no direction either.
+  double min_trace = 1e-6;
+
+  bool Check() const { return window_px > 0.0 && min_coherence >= 0.0 && min_coherence <= 1.0 && min_trace >= 0.0; }
+};
+
+// One channel, degrees in [0, 180) on the normal map's grid (pitch kept); 0 where no direction
+// (coherence or trace too low, or the normal not a finite unit-like vector). `normals`: 3 channels,
+// world frame (x right, y up; rows grow with -y). Throws std::invalid_argument for a map without 3
+// channels or invalid options. Parallel over rows; 6 float planes of scratch (the tensor and its
+// blurred copy).
+Image FibreTurnFromNormals(const Image& normals, const FibreDirectionOptions& options = {});
+
+}  // namespace u3mscan
