@@ -109,7 +109,7 @@ ChildResult RunChild(const std::vector<std::string>& args, const fs::path& log_p
   posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
   ChildResult result;
-  const auto start = SteadyClock::now();
+  const double start = SteadySeconds();
   pid_t pid = 0;
   const int spawn_error = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
@@ -119,7 +119,7 @@ ChildResult RunChild(const std::vector<std::string>& args, const fs::path& log_p
   while (wait4(pid, &status, 0, &usage) < 0) {
     if (errno != EINTR) throw std::runtime_error("wait4 failed");
   }
-  result.wall_s = SecondsSince(start);
+  result.wall_s = SteadySeconds() - start;
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
   result.max_rss_mib = static_cast<double>(usage.ru_maxrss) / 1024.0;  // Linux: KiB
   return result;
@@ -702,7 +702,7 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
     if (cases.empty()) throw InputError("--only", "", "a part of at least one case name, e.g. plain_distant_48_fast");
   }
   std::vector<BenchRow> rows;
-  const auto start = SteadyClock::now();
+  const double start = SteadySeconds();
   for (std::size_t k = 0; k < cases.size(); ++k) {
     BenchRow row;
     try {
@@ -724,7 +724,7 @@ std::vector<BenchRow> RunBench(const BenchOptions& options) {
   }
   if (!options.keep_work) fs::remove_all(options.out_dir / "work", ec);
   LogInfo() << "bench: " << rows.size() << " runs in "
-            << Fixed(SecondsSince(start), 1) << " s, written to "
+            << Fixed(SteadySeconds() - start, 1) << " s, written to "
             << options.out_dir.string();
   return rows;
 }

@@ -274,10 +274,10 @@ std::vector<DiLiGenTRun> RunDiLiGenTMethods(const DiLiGenTObject& object) {
     reconstruction::PhotometricStereoOptions options;
     options.solver = solver;
     options.diffuse_model = diffuse;
-    const auto start = SteadyClock::now();
+    const double start = SteadySeconds();
     const reconstruction::PhotometricStereoResult result = reconstruction::RunPhotometricStereo(object.stack, options);
     DiLiGenTRun run;
-    run.seconds = SecondsSince(start);
+    run.seconds = SteadySeconds() - start;
     run.object = object.name;
     run.lights = static_cast<int>(object.stack.lights.size());
     run.solver = reconstruction::PsSolverName(solver);

@@ -1,20 +1,15 @@
 #pragma once
 // Wall-clock time of a stage, for the run times the reports print: the steady clock (it never jumps
-// with the system clock), in seconds.
+// with the system clock), in seconds. One style everywhere: `const double start = SteadySeconds();`
+// when the stage begins, `SteadySeconds() - start` when it ends.
 
 #include <chrono>
 
 namespace u3mscan {
 
-using SteadyClock = std::chrono::steady_clock;
-
-// The steady clock's reading in seconds: only differences of two readings mean anything (a stage's
-// seconds = SteadySeconds() at its end - SteadySeconds() at its start).
-inline double SteadySeconds() { return std::chrono::duration<double>(SteadyClock::now().time_since_epoch()).count(); }
-
-// Seconds from `start` (SteadyClock::now() taken when the stage began) to now.
-inline double SecondsSince(SteadyClock::time_point start) {
-  return std::chrono::duration<double>(SteadyClock::now() - start).count();
+// The steady clock's reading in seconds: only differences of two readings mean anything.
+inline double SteadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 }  // namespace u3mscan

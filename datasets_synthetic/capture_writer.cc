@@ -345,12 +345,12 @@ void WriteEverything(const SceneTruth& render_scene, const SceneTruth& scene, co
   for (std::size_t k = 0; k < jobs.size(); ++k) {
     const FrameJob& job = jobs[k];
     const RigCamera& cam = rig.cameras[job.camera];
-    const auto start = SteadyClock::now();
+    const double start = SteadySeconds();
     if (renderer.camera_index() != job.camera) renderer.SetCamera(job.camera);
     const Image linear = job.render(renderer);
     const RawFrame raw = ExposeSensor(linear, rig.sensor, FrameSeed(rig.seed, "camera:" + cam.id),
                                       FrameSeed(rig.seed, NoiseName(job.spec.file)), options.format == FrameFormat::kDng);
-    stats->render_seconds += SecondsSince(start);
+    stats->render_seconds += SteadySeconds() - start;
     stats->megapixels_rendered += 1e-6 * cam.width * cam.height;
     WriteFrame(raw, rig.sensor, options.format, capture_dir / job.spec.file);
     ++stats->frames;
@@ -420,7 +420,7 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& scene, const Rig& rig, cons
 CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTruth& scene, const Rig& rig,
                                    const CaptureOptions& options, const fs::path& out_dir,
                                    const TruthWriter& truth_writer) {
-  const auto start = SteadyClock::now();
+  const double start = SteadySeconds();
   if (!options.Check()) throw std::invalid_argument("WriteSyntheticCapture: supersample must be >= 1");
   // Same rectangle: the renderer centres render_scene on the origin, the manifest's grid is scene's.
   const double tolerance = 1e-9 * (1.0 + scene.height_mm.width() * scene.pitch_mm + scene.height_mm.height() * scene.pitch_mm);
@@ -432,7 +432,7 @@ CaptureStats WriteSyntheticCapture(const SceneTruth& render_scene, const SceneTr
   WriteFolderAtomically(out_dir, [&](const fs::path& staging) {
     WriteEverything(render_scene, scene, rig, options, staging, truth_writer, &stats);
   });
-  stats.total_seconds = SecondsSince(start);
+  stats.total_seconds = SteadySeconds() - start;
   LogInfo() << "synth: " << stats.frames << " frames, " << stats.megapixels_rendered << " MP rendered at "
             << stats.MegapixelsPerSecond() << " MP/s (" << stats.total_seconds << " s in all) -> "
             << fs::absolute(out_dir).lexically_normal().string();

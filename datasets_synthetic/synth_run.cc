@@ -81,11 +81,11 @@ CaptureStats RunSynth(const SynthOptions& options, const fs::path& out_dir, cons
   scene_options.pitch_mm = rig_options.pitch_mm;
   scene_options.seed = options.seed;
   const int supersample = options.supersample > 0 ? options.supersample : AutoSupersample(options.width, options.height);
-  const auto start = SteadyClock::now();
+  const double start = SteadySeconds();
   const OversampledScene scene = MakeOversampledScene(options.scene, scene_options, supersample);
   LogInfo() << "synth: scene '" << options.scene << "' " << scene_options.width << "x" << scene_options.height << " at "
             << options.dpi << " dpi, sampled " << scene.oversample << "x finer, " << supersample << "x" << supersample
-            << " rays per pixel; made in " << SecondsSince(start) << " s";
+            << " rays per pixel; made in " << SteadySeconds() - start << " s";
   CaptureOptions capture = options.capture;
   capture.supersample = supersample;
   return WriteSyntheticCapture(scene.fine, scene.truth, rig, capture, out_dir, truth_writer);

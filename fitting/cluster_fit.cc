@@ -356,18 +356,18 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
   Matrix7 fisher;
   // Fisher information (and the context's cost) at `p` with `free` deciding the colour passes.
   auto update_fisher = [&](const ParameterVector& p, const ParameterMask& free) {
-    const auto t_obs = SteadyClock::now();
+    const double t_obs = SteadySeconds();
     double cost = 0.0;
     int residual_count = 0;
     fisher = FisherInformation(samples, p, options, free, &cost, &residual_count);
     context.cost = cost;
     context.residual_count = residual_count;
-    *observability_s += SecondsSince(t_obs);
+    *observability_s += SteadySeconds() - t_obs;
   };
   // The leave-out rule over `free`, then: keep a left-out parameter whose default the data exclude.
   auto decide = [&](const ParameterVector& p, const ParameterMask& free) {
     update_fisher(p, free);
-    const auto t_obs = SteadyClock::now();
+    const double t_obs = SteadySeconds();
     ObservabilityDecision d = DecideObservability(fisher, free, context, options.observability);
     const double cost_at_fit = SamplesCost(samples, samples.pixels(), p, options, residuals, free);
     for (int i = 0; i < kFitParameterCount; ++i) {
@@ -386,7 +386,7 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
         d.reason[i] = buffer;
       }
     }
-    *observability_s += SecondsSince(t_obs);
+    *observability_s += SteadySeconds() - t_obs;
     return d;
   };
   // Left-out parameters to their defaults (held ones stay held) and a refit without them; returns

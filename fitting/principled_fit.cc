@@ -556,7 +556,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   const std::size_t n_obs = stack.observations.size();
 
   // 1. Gather: features of an evenly strided candidate set of pixels.
-  auto t = SteadyClock::now();
+  double t = SteadySeconds();
   ReportProgress(progress, "fit: gather", 0.0);
   const std::size_t candidate_count = std::min<std::size_t>(pixel_count, options.clustering.max_samples);
   std::vector<std::size_t> candidates(candidate_count);
@@ -570,18 +570,18 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       valid[i] = count >= options.min_observations ? 1 : 0;
     }
   });
-  model.times.gather_s = SecondsSince(t);
+  model.times.gather_s = SteadySeconds() - t;
 
   // 2. Clustering of the candidates.
-  t = SteadyClock::now();
+  t = SteadySeconds();
   ReportProgress(progress, "fit: clustering", 0.0);
   const Clustering clustering = ClusterPixels(features, kAppearanceFeatureCount, valid, options.clustering);
-  model.times.clustering_s = SecondsSince(t);
+  model.times.clustering_s = SteadySeconds() - t;
   const int k = clustering.cluster_count;
   if (k == 0) throw std::invalid_argument("FitPrincipled: no pixel has enough usable observations");
 
   // 3. Cluster fits on evenly spread samples of each cluster's candidates, clusters in parallel.
-  t = SteadyClock::now();
+  t = SteadySeconds();
   std::vector<std::vector<std::size_t>> members(k);
   for (std::size_t i = 0; i < candidate_count; ++i) {
     if (clustering.labels[i] >= 0) members[clustering.labels[i]].push_back(candidates[i]);
@@ -711,7 +711,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         for (int i = 0; i < kFitParameterCount; ++i) fixed[i] = fixed[i] || left_out[i];
         refit(c, fixed, values);
       });
-  model.times.cluster_fit_s = SecondsSince(t);
+  model.times.cluster_fit_s = SteadySeconds() - t;
   for (double s : observability_s) model.times.observability_s += s;
   for (const ClusterFit& c : model.clusters) {
     if (!c.converged) {
@@ -838,7 +838,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   if (band.observations.size() != model.observation_levels.size()) {
     throw std::invalid_argument("FitPixelRows: the band's observations are not the model's");
   }
-  const auto t = SteadyClock::now();
+  const double t = SteadySeconds();
   const FitContext context = MakeContext(band, geometry, options, model.observation_levels);
   const std::size_t n_obs = band.observations.size();
   const Clustering& clustering = model.clustering;
@@ -961,7 +961,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   tally->fitted += fitted;
   tally->refined += refined;
   for (int i = 0; i < kFitParameterCount; ++i) tally->variance_delta[i] += variance_delta[i];
-  tally->seconds += SecondsSince(t);
+  tally->seconds += SteadySeconds() - t;
 }
 
 // The anisotropy rotation's report, once the anisotropic map is decided: measured where that map
@@ -1120,13 +1120,13 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
 
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
                         const ProgressCallback& progress) {
-  const auto t_start = SteadyClock::now();
+  const double t_start = SteadySeconds();
   const ClusterModel model = FitClusterModel(stack, geometry, options, progress);
   FitResult result = StartPixelMaps(model, stack.grid);
   PixelTally tally;
   FitPixelRows(model, stack, geometry, 0, &result, &tally, progress);
   FinishPixelMaps(model, tally, &result);
-  result.times.total_s = SecondsSince(t_start);
+  result.times.total_s = SteadySeconds() - t_start;
   LogInfo() << "fitting: " << result.clusters.size() << " clusters, " << result.convergence.pixels_fitted << " pixels ("
             << result.convergence.pixels_refined << " refined) in " << result.times.total_s << " s";
   return result;

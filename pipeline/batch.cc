@@ -93,7 +93,7 @@ std::vector<JobOutcome> RunBatch(const std::vector<CaptureJob>& jobs, const Capt
         LogInfo() << jobs[i].name << ": output complete, skipped";
         continue;
       }
-      const auto start = SteadyClock::now();
+      const double start = SteadySeconds();
       try {
         process(jobs[i]);
         outcome.ok = true;
@@ -102,7 +102,7 @@ std::vector<JobOutcome> RunBatch(const std::vector<CaptureJob>& jobs, const Capt
         outcome.error = e.what();
         LogError() << jobs[i].name << ": " << e.what();
       }
-      outcome.seconds = SecondsSince(start);
+      outcome.seconds = SteadySeconds() - start;
     }
   };
   const int workers = std::clamp(options.parallel_captures, 1, static_cast<int>(std::max<std::size_t>(1, jobs.size())));
