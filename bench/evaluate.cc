@@ -21,6 +21,7 @@
 #include "core/principled_brdf.h"
 #include "datasets_synthetic/renderer.h"
 #include "fitting/shading_frame.h"
+#include "pipeline/json_number.h"
 #include "reconstruction/relief_levelling.h"
 #include "u3m/image_io.h"
 
@@ -98,8 +99,6 @@ std::string Fixed(double v, int digits) {
   s << std::fixed << std::setprecision(digits) << v;
   return s.str();
 }
-
-json Number(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 }  // namespace
 
@@ -494,23 +493,23 @@ json EvaluationToJson(const Evaluation& ev) {
   json parameters = json::array();
   for (const auto& p : ev.parameters) {
     parameters.push_back({{"name", p.name}, {"u3m_key", p.u3m_key}, {"source", p.source}, {"measured", p.measured},
-                          {"reliable", p.reliable}, {"truth_mean", Number(p.truth_mean)}, {"estimate_mean", Number(p.estimate_mean)},
-                          {"mean_abs_error", Number(p.mean_abs_error)}, {"bias", Number(p.bias)}});
+                          {"reliable", p.reliable}, {"truth_mean", FiniteOrNull(p.truth_mean)}, {"estimate_mean", FiniteOrNull(p.estimate_mean)},
+                          {"mean_abs_error", FiniteOrNull(p.mean_abs_error)}, {"bias", FiniteOrNull(p.bias)}});
   }
   return {{"scene", ev.scene},
           {"side", ev.side},
           {"grid", {{"width", ev.width}, {"height", ev.height}}},
           {"pixels_compared", ev.pixels_compared},
-          {"normal_error_deg", {{"mean", Number(ev.normal_mean_deg)}, {"median", Number(ev.normal_median_deg)}, {"p95", Number(ev.normal_p95_deg)}}},
-          {"albedo_ciede2000", {{"mean", Number(ev.albedo_de_mean)}, {"median", Number(ev.albedo_de_median)}, {"p95", Number(ev.albedo_de_p95)}}},
-          {"base_color_ciede2000", {{"mean", Number(ev.base_color_de_mean)}, {"median", Number(ev.base_color_de_median)}, {"p95", Number(ev.base_color_de_p95)}}},
-          {"height", {{"rmse_mm", Number(ev.height_rmse_mm)}, {"range_mm", Number(ev.height_range_mm)}, {"rmse_percent_of_range", Number(ev.height_rmse_percent)},
-                      {"truth_levelled", {{"levelling", ev.height_levelling}, {"rmse_mm", Number(ev.height_levelled_rmse_mm)},
-                                          {"rmse_percent_of_range", Number(ev.height_levelled_rmse_percent)}}}}},
+          {"normal_error_deg", {{"mean", FiniteOrNull(ev.normal_mean_deg)}, {"median", FiniteOrNull(ev.normal_median_deg)}, {"p95", FiniteOrNull(ev.normal_p95_deg)}}},
+          {"albedo_ciede2000", {{"mean", FiniteOrNull(ev.albedo_de_mean)}, {"median", FiniteOrNull(ev.albedo_de_median)}, {"p95", FiniteOrNull(ev.albedo_de_p95)}}},
+          {"base_color_ciede2000", {{"mean", FiniteOrNull(ev.base_color_de_mean)}, {"median", FiniteOrNull(ev.base_color_de_median)}, {"p95", FiniteOrNull(ev.base_color_de_p95)}}},
+          {"height", {{"rmse_mm", FiniteOrNull(ev.height_rmse_mm)}, {"range_mm", FiniteOrNull(ev.height_range_mm)}, {"rmse_percent_of_range", FiniteOrNull(ev.height_rmse_percent)},
+                      {"truth_levelled", {{"levelling", ev.height_levelling}, {"rmse_mm", FiniteOrNull(ev.height_levelled_rmse_mm)},
+                                          {"rmse_percent_of_range", FiniteOrNull(ev.height_levelled_rmse_percent)}}}}},
           {"parameters", parameters},
           {"rerender", {{"held_out_lights", ev.held_out_lights}, {"truth_reflectance_model", ev.truth_reflectance_model},
-                        {"relative_rmse", Number(ev.rerender_relative_rmse)},
-                        {"truth_maps_relative_rmse", Number(ev.rerender_truth_maps_relative_rmse)}}}};
+                        {"relative_rmse", FiniteOrNull(ev.rerender_relative_rmse)},
+                        {"truth_maps_relative_rmse", FiniteOrNull(ev.rerender_truth_maps_relative_rmse)}}}};
 }
 
 const ParameterError& FindParameter(const Evaluation& evaluation, const std::string& name) {

@@ -6,6 +6,7 @@
 
 #include "bench/bench.h"
 #include "bench/table_cells.h"
+#include "pipeline/json_number.h"
 
 namespace u3mscan::bench {
 namespace {
@@ -88,7 +89,7 @@ nlohmann::json TargetsToJson(const std::vector<TargetCheck>& checks) {
   nlohmann::json out = nlohmann::json::array();
   for (const TargetCheck& check : checks) {
     out.push_back({{"figure", check.figure},
-                   {"value", std::isfinite(check.value) ? nlohmann::json(check.value) : nlohmann::json()},
+                   {"value", FiniteOrNull(check.value)},
                    {"limit", check.limit},
                    {"not_measured", check.not_measured},
                    {"met", check.Judged() ? nlohmann::json(check.Met()) : nlohmann::json()}});

@@ -2,14 +2,14 @@
 
 #include <cmath>
 
+#include "pipeline/json_number.h"
+
 namespace u3mscan::pipeline {
 namespace {
 
 // Keys in the order docs/fitting.md gives them: the decisions first, as an operator reads them.
 using json = nlohmann::ordered_json;
 using fitting::kFitParameterCount;
-
-json Number(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 // A map's decision (maps.<parameter> and maps.anisotropy_rotation), under its U3M key; `unit`
 // only where the value is not in [0, 1].
@@ -19,8 +19,8 @@ json MapJson(const fitting::MapReport& m, const char* u3m_key, const char* unit 
   out.update(json{{"measured", m.measured},
           {"constant", m.constant},
           {"texture", m.measured && !m.constant},
-          {"value", Number(m.value)},
-          {"spread", Number(m.spread)},
+          {"value", FiniteOrNull<json>(m.value)},
+          {"spread", FiniteOrNull<json>(m.spread)},
           {"reason", m.reason},
           {"reliable", m.reliable},
           {"unreliable_reason", m.unreliable_reason}});
@@ -31,7 +31,7 @@ json ClusterJson(const fitting::ClusterFit& f) {
   json parameters = json::object();
   for (int i = 0; i < kFitParameterCount; ++i) {
     const fitting::ParameterEstimate& e = f.parameters[i];
-    parameters[fitting::FitParameterName(i)] = {{"value", Number(e.value)},       {"std", Number(e.std_dev)},
+    parameters[fitting::FitParameterName(i)] = {{"value", FiniteOrNull<json>(e.value)},       {"std", FiniteOrNull<json>(e.std_dev)},
                                                 {"measured", e.measured},          {"reason", e.reason},
                                                 {"reliable", e.reliable},          {"unreliable_reason", e.unreliable_reason}};
   }
@@ -41,15 +41,15 @@ json ClusterJson(const fitting::ClusterFit& f) {
           {"converged", f.converged},
           {"iterations", f.iterations},
           {"normal_passes", f.normal_passes},
-          {"normal_change_deg", Number(f.normal_change_deg)},
-          {"initial_cost", Number(f.initial_cost)},
-          {"final_cost", Number(f.final_cost)},
-          {"rms_relative_residual", Number(f.rms_relative_residual)},
-          {"saturated_share", Number(f.saturated_share)},
-          {"highlight_share", Number(f.highlight_share)},
-          {"anisotropy_rotation_deg", Number(f.anisotropy_rotation_deg)},
+          {"normal_change_deg", FiniteOrNull<json>(f.normal_change_deg)},
+          {"initial_cost", FiniteOrNull<json>(f.initial_cost)},
+          {"final_cost", FiniteOrNull<json>(f.final_cost)},
+          {"rms_relative_residual", FiniteOrNull<json>(f.rms_relative_residual)},
+          {"saturated_share", FiniteOrNull<json>(f.saturated_share)},
+          {"highlight_share", FiniteOrNull<json>(f.highlight_share)},
+          {"anisotropy_rotation_deg", FiniteOrNull<json>(f.anisotropy_rotation_deg)},
           {"mean_base_color_linear",
-           {Number(f.mean_base_color(0)), Number(f.mean_base_color(1)), Number(f.mean_base_color(2))}},
+           {FiniteOrNull<json>(f.mean_base_color(0)), FiniteOrNull<json>(f.mean_base_color(1)), FiniteOrNull<json>(f.mean_base_color(2))}},
           {"message", f.message},
           {"parameters", parameters}};
 }
@@ -72,7 +72,7 @@ json FitResultToJson(const fitting::FitResult& result) {
     const fitting::MapReport& m = result.maps[i];
     maps[fitting::FitParameterName(i)] = MapJson(m, fitting::U3mParameterName(static_cast<fitting::FitParameter>(i)));
     if (!m.measured) {
-      not_measured.push_back({{"parameter", fitting::FitParameterName(i)}, {"written_as", Number(m.value)}, {"reason", m.reason}});
+      not_measured.push_back({{"parameter", fitting::FitParameterName(i)}, {"written_as", FiniteOrNull<json>(m.value)}, {"reason", m.reason}});
     }
   }
   maps["anisotropy_rotation"] = MapJson(result.rotation_report, "anisotropy_rotation", "deg");
@@ -93,20 +93,20 @@ json FitResultToJson(const fitting::FitResult& result) {
             {"pixels_refined", c.pixels_refined},
             {"messages", c.messages}}},
           {"times_s",
-           {{"gather", Number(t.gather_s)},
-            {"clustering", Number(t.clustering_s)},
-            {"cluster_fit", Number(t.cluster_fit_s)},
-            {"observability", Number(t.observability_s)},
-            {"per_pixel", Number(t.per_pixel_s)},
-            {"total", Number(t.total_s)}}},
+           {{"gather", FiniteOrNull<json>(t.gather_s)},
+            {"clustering", FiniteOrNull<json>(t.clustering_s)},
+            {"cluster_fit", FiniteOrNull<json>(t.cluster_fit_s)},
+            {"observability", FiniteOrNull<json>(t.observability_s)},
+            {"per_pixel", FiniteOrNull<json>(t.per_pixel_s)},
+            {"total", FiniteOrNull<json>(t.total_s)}}},
           {"options",
            {{"cluster_count", o.clustering.cluster_count},
             {"samples_per_cluster", o.samples_per_cluster},
-            {"noise_relative", Number(o.noise_relative)},
-            {"noise_floor", Number(o.noise_floor)},
+            {"noise_relative", FiniteOrNull<json>(o.noise_relative)},
+            {"noise_floor", FiniteOrNull<json>(o.noise_floor)},
             {"robust_loss", LossName(o.robust_loss.kind)},
-            {"robust_scale_sigma", Number(o.robust_loss.scale)},
-            {"observability_max_std", Number(o.observability.max_std)},
+            {"robust_scale_sigma", FiniteOrNull<json>(o.robust_loss.scale)},
+            {"observability_max_std", FiniteOrNull<json>(o.observability.max_std)},
             {"observability_effective_pixels", o.observability.effective_pixels},
             {"fit_anisotropy_rotation", o.fit_anisotropy_rotation},
             {"mode", fitting::FitModeName(o.mode)},
