@@ -459,11 +459,23 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
   WriteTextFileAtomically(path, s.str(), "a writable output folder");
 }
 
-void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& options, const fs::path& path) {
+namespace {
+
+// The run of `capture` with `preset` and no method overridden (the baseline the methods, held-out,
+// model-mismatch, camera-finer and needs-less tables compare with); null when it did not run or failed.
+const BenchRow* DefaultRun(const std::vector<BenchRow>& rows, const std::string& capture, const std::string& preset) {
+  for (const BenchRow& r : rows) {
+    if (r.c.CaptureId() == capture && r.c.preset == preset && r.c.solver.empty() && r.c.integrator.empty() &&
+        r.c.fit_mode.empty() && r.c.hold_out_lights.empty() && r.c.ps_supersample == 1 && r.status == "ok") {
+      return &r;
+    }
+  }
+  return nullptr;
+}
+
+// Every run: its times and its errors, one line each (a failed run: its error).
+std::string EveryRunSection(const std::vector<BenchRow>& rows) {
   std::ostringstream s;
-  s << "# u3mscan bench" << (options.quick ? " --quick" : "") << "\n\n";
-  s << UtcDate() << ", " << Machine() << ". Times in seconds (the run's report.json), peak RSS of the child `u3mscan "
-    << "process` in MiB; errors against the synthetic truth (docs/bench.md).\n\n";
   s << "## Every run\n\n";
   s << "| group | scene | rig | px | lights | preset | PS/integration | total s | PS s | int. s | fit s | peak MiB | normal mean / p95 deg "
        "| albedo dE | base dE | height RMSE % | roughness err | specular err | sheen err | re-render % |\n";
@@ -482,11 +494,13 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       << Fixed(e.base_color_de_mean, 2) << " | " << Fixed(e.height_rmse_percent, 1) << " | " << ParameterCell(r, 0) << " | "
       << ParameterCell(r, 1) << " | " << ParameterCell(r, 3) << " | " << Fixed(100.0 * e.rerender_relative_rmse, 2) << " |\n";
   }
+  return s.str();
+}
 
-  s << IssueTargetsSection(rows);
-
-  // Presets: means over the matrix captures that ran with every preset, so each preset is
-  // averaged over the same scenes.
+// Presets: means over the matrix captures that ran with every preset, so each preset is
+// averaged over the same scenes.
+std::string PresetsSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   std::map<std::string, int> presets_ok;
   for (const BenchRow& r : rows) {
     if (r.c.group == "matrix" && r.status == "ok") ++presets_ok[r.c.CaptureId()];
@@ -509,21 +523,16 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     s << "| " << preset << " | " << k << " | " << Fixed(t / k, 2) << " | " << Fixed(n_err / k, 2) << " | " << Fixed(de / k, 2)
       << " | " << Fixed(hr / k, 1) << " | " << Fixed(100.0 * rr / k, 2) << " |\n";
   }
+  return s.str();
+}
 
-  // Methods: each override run against the balanced run on the same capture.
-  auto find = [&](const std::string& capture, const std::string& preset) -> const BenchRow* {
-    for (const BenchRow& r : rows) {
-      if (r.c.CaptureId() == capture && r.c.preset == preset && r.c.solver.empty() && r.c.integrator.empty() &&
-          r.c.fit_mode.empty() && r.c.hold_out_lights.empty() && r.c.ps_supersample == 1 && r.status == "ok") {
-        return &r;
-      }
-    }
-    return nullptr;
-  };
+// Methods: each override run (solver, integrator) against the balanced run on the same capture.
+std::string MethodsSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n## Methods on the same capture\n\n| capture | method | total s | step s | normal mean deg | height RMSE % | re-render % |\n|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "methods" || r.status != "ok" || !r.c.fit_mode.empty()) continue;
-    const BenchRow* base = find(r.c.CaptureId(), "balanced");
+    const BenchRow* base = DefaultRun(rows, r.c.CaptureId(), "balanced");
     auto line = [&](const BenchRow& x, const std::string& label, double step_s) {
       s << "| " << x.c.CaptureId() << " | " << label << " | " << Fixed(x.total_s, 2) << " | " << Fixed(step_s, 2) << " | "
         << Fixed(x.evaluation.normal_mean_deg, 2) << " | " << Fixed(x.evaluation.height_rmse_percent, 1) << " | "
@@ -534,12 +543,17 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
                    ps ? base->stages.photometric_stereo : base->stages.integration);
     line(r, ps ? "PS " + r.solver_used : "integration " + r.integrator_used, ps ? r.stages.photometric_stereo : r.stages.integration);
   }
-  // Fit mode: --fit-mode clusters against the balanced run (per-pixel) on the same capture.
+  return s.str();
+}
+
+// Fit mode: --fit-mode clusters against the balanced run (per-pixel) on the same capture.
+std::string FitModeSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n### Fit: clusters vs per-pixel (same capture, preset balanced)\n\n| capture | fit mode | total s | fit s | "
        "roughness err | specular err | anisotropic err | re-render % | flagged unreliable |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "methods" || r.status != "ok" || r.c.fit_mode.empty()) continue;
-    const BenchRow* base = find(r.c.CaptureId(), "balanced");
+    const BenchRow* base = DefaultRun(rows, r.c.CaptureId(), "balanced");
     auto line = [&](const BenchRow& x) {
       s << "| " << x.c.CaptureId() << " | " << x.fit_mode_used << " | " << Fixed(x.total_s, 2) << " | "
         << Fixed(x.stages.fit, 2) << " | " << ParameterCell(x, 0) << " | " << ParameterCell(x, 1) << " | "
@@ -549,21 +563,29 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     if (base) line(*base);
     line(r);
   }
+  return s.str();
+}
 
-  // Held out: the held-out photographs' error against the truth-based re-render of the same run
-  // and of the run with every light.
+// Held out: the held-out photographs' error against the truth-based re-render of the same run
+// and of the run with every light.
+std::string HeldOutSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n## Held-out photographs (lights left out of the fit)\n\n| capture | maps dpi | preset | held-out lights | total s | "
        "held-out photographs re-render % | truth re-render % (this run) | truth re-render % (every light) |\n"
        "|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "held-out" || r.status != "ok") continue;
-    const BenchRow* all = r.c.camera_per_map == 1 ? find(r.c.CaptureId(), r.c.preset) : nullptr;
+    const BenchRow* all = r.c.camera_per_map == 1 ? DefaultRun(rows, r.c.CaptureId(), r.c.preset) : nullptr;
     s << "| " << r.c.CaptureId() << " | " << Fixed(r.c.MapsDpi(), 0) << " | " << r.c.preset << " | " << r.c.hold_out_lights << " | " << Fixed(r.total_s, 2)
       << " | " << Fixed(100.0 * r.held_out_rmse, 2) << " | " << Fixed(100.0 * r.evaluation.rerender_relative_rmse, 2)
       << " | " << (all ? Fixed(100.0 * all->evaluation.rerender_relative_rmse, 2) : std::string("-")) << " |\n";
   }
+  return s.str();
+}
 
-  // Model mismatch, against the Principled velvet of the same rig and preset.
+// Model mismatch, against the Principled velvet of the same rig and preset.
+std::string ModelMismatchSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n## Model mismatch (velvet rendered with Charlie sheen, fitted with the Principled BRDF)\n\n| capture | "
        "preset | normal mean deg | base dE | roughness err | specular err | sheen err | re-render % | truth's own maps "
        "re-render % | flagged unreliable | Principled velvet: roughness err | specular err | sheen err | re-render % |\n"
@@ -572,7 +594,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     if (r.c.group != "model-mismatch" || r.status != "ok") continue;
     BenchCase principled = r.c;
     principled.scene = "velvet";
-    const BenchRow* same = find(principled.CaptureId(), r.c.preset);
+    const BenchRow* same = DefaultRun(rows, principled.CaptureId(), r.c.preset);
     const Evaluation& e = r.evaluation;
     s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << Fixed(e.normal_mean_deg, 2) << " | "
       << Fixed(e.base_color_de_mean, 2) << " | " << ParameterCell(r, 0) << " | " << ParameterCell(r, 1) << " | "
@@ -585,8 +607,12 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       s << "- | - | - | - |\n";
     }
   }
+  return s.str();
+}
 
-  // Camera finer than the maps, against the 1x matrix run of the same scene and preset.
+// Camera finer than the maps, against the 1x matrix run of the same scene and preset.
+std::string CameraFinerSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n## Camera finer than the maps (footprint pre-filter)\n\n| capture | camera px per map px | photometric stereo grid | "
        "level | preset | total s | normal mean / p95 deg | albedo dE | height % | re-render % | truth's own maps re-render % | "
        "at 1x: normal mean / p95 deg | height % | re-render % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
@@ -594,7 +620,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     if (r.c.group != "camera-finer" || r.status != "ok") continue;
     BenchCase one = r.c;
     one.camera_per_map = 1;
-    const BenchRow* at_1x = find(one.CaptureId(), r.c.preset);
+    const BenchRow* at_1x = DefaultRun(rows, one.CaptureId(), r.c.preset);
     const Evaluation& e = r.evaluation;
     s << "| " << r.c.CaptureId() << " | " << r.c.camera_per_map << " | "
       << (r.c.ps_supersample == 1 ? "maps'" : "camera's (--ps-supersample 0)") << " | " << r.c.level << " | " << r.c.preset << " | "
@@ -610,8 +636,12 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
       s << "- | - | - |\n";
     }
   }
+  return s.str();
+}
 
-  // Needs less: steps skipped and the time they save.
+// Needs less: steps skipped and the time they save.
+std::string NeedsLessSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
   s << "\n## Scenes that need less: steps skipped and time saved\n\n| capture | preset | steps skipped | calibration s | total s | "
        "compared with | its calibration s | its total s | saved s |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
@@ -622,21 +652,34 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     if (r.c.group == "needs-less") {
       BenchCase with = r.c;
       with.calibration_frames = true;
-      full = find(with.CaptureId(), r.c.preset);
+      full = DefaultRun(rows, with.CaptureId(), r.c.preset);
     } else if (r.c.group == "matrix" && r.c.preset == "balanced" && r.c.rig == "distant") {
       BenchCase near = r.c;
       near.rig = "near";
-      full = find(near.CaptureId(), r.c.preset);
+      full = DefaultRun(rows, near.CaptureId(), r.c.preset);
     } else if (r.c.group == "matrix" && r.c.rig == "near") {
       BenchCase oblique = r.c;
       oblique.rig = "oblique";
-      full = find(oblique.CaptureId(), r.c.preset);
+      full = DefaultRun(rows, oblique.CaptureId(), r.c.preset);
     }
     if (!full) continue;
     s << "| " << r.c.CaptureId() << " | " << r.c.preset << " | " << Join(r.skipped, "; ") << " | " << Fixed(r.stages.calibration, 2) << " | "
       << Fixed(r.total_s, 2) << " | " << full->c.CaptureId() << " | " << Fixed(full->stages.calibration, 2) << " | "
       << Fixed(full->total_s, 2) << " | " << Fixed(full->total_s - r.total_s, 2) << " |\n";
   }
+  return s.str();
+}
+
+}  // namespace
+
+void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& options, const fs::path& path) {
+  std::ostringstream s;
+  s << "# u3mscan bench" << (options.quick ? " --quick" : "") << "\n\n";
+  s << UtcDate() << ", " << Machine() << ". Times in seconds (the run's report.json), peak RSS of the child `u3mscan "
+    << "process` in MiB; errors against the synthetic truth (docs/bench.md).\n\n";
+  s << EveryRunSection(rows) << IssueTargetsSection(rows) << PresetsSection(rows) << MethodsSection(rows)
+    << FitModeSection(rows) << HeldOutSection(rows) << ModelMismatchSection(rows) << CameraFinerSection(rows)
+    << NeedsLessSection(rows);
   s << "\nPlots: `error_vs_time.svg`, `rerender_vs_time.svg`, `time_vs_megapixels.svg`, `time_vs_lights.svg`.\n";
   WriteTextFileAtomically(path, s.str(), "a writable output folder");
 }
