@@ -58,8 +58,7 @@ struct StageOptions {
   bool place_fine_pixels_on_plan = true;
   // The fit's shading frame turned per pixel along the fibres that the normals' relief shows
   // (pipeline/fibre_direction.h, fitting::SurfaceGeometry::fibre_turn_deg), each cluster's
-  // anisotropy rotation fitted on top (`process --follow-fibres`). In one band only: bands fit as
-  // before.
+  // anisotropy rotation fitted on top (`process --follow-fibres`; in bands too, pipeline/tiled_side.cc).
   bool follow_fibres = false;
   FibreDirectionOptions fibre_directions;
   // In bands (pipeline/tiled_side.cc), sweeps reuse the solves of earlier sweeps instead of

@@ -11,6 +11,7 @@
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/fine_colour.h"
+#include "pipeline/fibre_direction.h"
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
@@ -161,10 +162,11 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   return band;
 }
 
-// The surface the fit and the held-out check see on a band: the reconstruction's rows of it.
-fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows) {
+// The surface the fit and the held-out check see on a band: the reconstruction's rows of it, and
+// the rows of the fibres' turns when there are any (`turns`, on the whole grid).
+fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows, const Image& turns = Image()) {
   return {CropRows(geometry.photometric_stereo.normal, row0, rows), CropRows(geometry.photometric_stereo.albedo, row0, rows),
-          CropRows(geometry.height_mm, row0, rows), Image()};
+          CropRows(geometry.height_mm, row0, rows), turns.empty() ? Image() : CropRows(turns, row0, rows)};
 }
 
 }  // namespace
@@ -335,6 +337,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         AddToSample(band, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_ps.albedo, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
+        if (options.follow_fibres) {
+          SampleRows(FibreTurnFromNormals(band_ps.normal, options.fibre_directions), solved.Row0(b), fine_step,
+                     fine_sample_grid, &fine_sample_geometry.fibre_turn_deg);
+        }
       }
       if (role.keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
@@ -652,19 +658,30 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     } else if (!fine_marks.empty()) {
       mark(fine_marks, fine_grid, band);
     }
+    fitting::SurfaceGeometry surface;
     if (!fine_fit_normal.empty()) {
-      return {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image()};
+      surface = {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image()};
+    } else {
+      PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
+          *band, ps_options,
+          fine_solve_height.empty()
+              ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
+              : CropRows(fine_solve_height, row0, rows));
+      surface = {std::move(solved.normal), std::move(solved.albedo), Image(), Image()};
     }
-    PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
-        *band, ps_options,
-        fine_solve_height.empty()
-            ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
-            : CropRows(fine_solve_height, row0, rows));
-    return {std::move(solved.normal), std::move(solved.albedo), Image(), Image()};
+    // The fibres' turns of a band, from its own normals (within the window's reach of a band edge,
+    // a few fine rows, they differ slightly from one band's).
+    if (options.follow_fibres) surface.fibre_turn_deg = FibreTurnFromNormals(surface.normals, options.fibre_directions);
+    return surface;
   };
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
   // solved them; its heights from the whole fine grid's.
+  // The fibres' turns on the maps' grid (StageOptions::follow_fibres): its normals are whole, so
+  // they are read once, as one band reads them, and cropped or sampled like the normals.
+  const Image maps_turns = options.follow_fibres
+                               ? FibreTurnFromNormals(geometry.photometric_stereo.normal, options.fibre_directions)
+                               : Image();
   fitting::SurfaceGeometry sample_geometry;
   if (clusters_on_fine_grid) {
     if (!fine_sample_gathered) {
@@ -675,6 +692,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_surface.normals, row0, fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_surface.albedo, row0, fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
+        if (!band_surface.fibre_turn_deg.empty()) {
+          SampleRows(band_surface.fibre_turn_deg, row0, fine_step, fine_sample_grid, &fine_sample_geometry.fibre_turn_deg);
+        }
         ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
       }
     }
@@ -685,6 +705,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
     SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
     SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);
+    if (!maps_turns.empty()) SampleRows(maps_turns, 0, step, sample_grid, &sample_geometry.fibre_turn_deg);
   }
   const fitting::ClusterModel model = fitting::FitClusterModel(out.sample, sample_geometry, options.fit, progress);
   out.fit = fitting::StartPixelMaps(model, grid);
@@ -693,7 +714,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     Stack band = bands.Build(frames, b);
     if (!shadow_height.empty()) mark(shadow_height, grid, &band);
     const int row0 = bands.Row0(b);
-    fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b)), row0, &out.fit, &tally);
+    fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b), maps_turns), row0, &out.fit, &tally);
     ReportProgress(progress, "fit: pixels", static_cast<double>(b + 1) / bands.count());
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
@@ -772,11 +793,6 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     detail += fine_detail + placed;
   }
   ReportFitStep(out.fit, std::move(detail), SteadySeconds() - start, report);
-  if (options.follow_fibres) {
-    report->warnings.push_back(
-        "follow fibres: not done in bands (the structure of the normals is read on one whole grid); each cluster kept "
-        "one anisotropy rotation");
-  }
 
   // Residual map: the observations FitResidualMap would take from the whole stack, band by band.
   start = SteadySeconds();

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <set>
 #include <stdexcept>
 #include <string>
 
@@ -16,6 +17,7 @@
 #include "capture/capture.h"
 #include "capture/stack_builder.h"
 #include "datasets_synthetic/synth_run.h"
+#include "pipeline/presets.h"
 #include "pipeline/process.h"
 #include "pipeline/tiles.h"
 #include "u3m/image_io.h"
@@ -27,14 +29,17 @@ namespace fs = std::filesystem;
 
 fs::path TestRoot() { return fs::temp_directory_path() / ("u3mscan_tiled_test_" + std::to_string(getpid())); }
 
-// Near point lights (so the near-light rounds run as sweeps), a textured scene, TIFF frames.
-fs::path MakeCapture(const std::string& name, bool calibration_frames, int lights) {
+// Near point lights (so the near-light rounds run as sweeps), a textured scene, TIFF frames; the
+// camera at `camera_per_map` times 300 dpi over the same 80 x 64 px of 300 dpi maps.
+fs::path MakeCapture(const std::string& name, bool calibration_frames, int lights, const std::string& scene = "twill",
+                     int camera_per_map = 1) {
   const fs::path dir = TestRoot() / name;
   synthetic::SynthOptions options;
-  options.scene = "twill";
+  options.scene = scene;
   options.rig = "near";
-  options.width = 80;
-  options.height = 64;
+  options.width = 80 * camera_per_map;
+  options.height = 64 * camera_per_map;
+  options.dpi = 300.0 * camera_per_map;
   options.lights = lights;
   options.capture.format = synthetic::FrameFormat::kTiff;
   options.capture.calibration_frames = calibration_frames;
@@ -271,30 +276,47 @@ TEST_F(TiledTest, HeldOutLightsInBandsGiveTheOneBandCheck) {
   EXPECT_TRUE(step);
 }
 
-// --follow-fibres reads the normals' structure on one whole grid: a run in bands does not follow
-// the fibres and says so in its warnings; one band follows them and records the option.
-TEST_F(TiledTest, FollowFibresIsRecordedAndBandsSayTheyDoNotFollow) {
-  const fs::path dir = MakeCapture("fibres", /*calibration_frames=*/false, 8);
+// --follow-fibres in bands: the maps' grid's turns are read once on its whole normals, as one band
+// reads them, so the per-pixel step turns every pixel as one band does (a satin seen by a camera at
+// twice the maps' dpi, whose floats the normals resolve; 16 lights so that anisotropic is measured).
+TEST_F(TiledTest, BandsFollowTheFibresAsOneBandDoes) {
+  const fs::path dir = MakeCapture("fibres", /*calibration_frames=*/false, 16, "satin", 2);
   ProcessOptions options;
   options.preset = Preset::kFast;
   options.follow_fibres = true;
   options.debug_maps = true;
+  options.dpi = 300.0;  // photometric stereo and the clusters on the camera's 2x finer grid
   CaptureJob whole_job{dir, TestRoot() / "fibres_whole", "fibres_whole"};
   const ProcessResult whole = ProcessCapture(whole_job, options);
   ASSERT_EQ(whole.report.options["tiles_front"]["bands"], 1);
   EXPECT_EQ(whole.report.options["follow_fibres"], true);
-  auto says_not_in_bands = [](const RunReport& report) {
-    for (const std::string& w : report.warnings) {
-      if (w.find("follow fibres: not done in bands") != std::string::npos) return true;
-    }
-    return false;
-  };
-  EXPECT_FALSE(says_not_in_bands(whole.report));
   options.max_memory_gib = whole.report.options["tiles_front"]["stack_gib"].get<double>() / 2.5;
   CaptureJob tiled_job{dir, TestRoot() / "fibres_tiled", "fibres_tiled"};
   const ProcessResult tiled = ProcessCapture(tiled_job, options);
   ASSERT_GT(tiled.report.options["tiles_front"]["bands"].get<int>(), 1);
-  EXPECT_TRUE(says_not_in_bands(tiled.report));
+  const fs::path whole_turns = whole_job.out_dir / "maps" / "anisotropy_rotation.exr";
+  const fs::path tiled_turns = tiled_job.out_dir / "maps" / "anisotropy_rotation.exr";
+  ASSERT_TRUE(fs::exists(whole_turns));
+  ASSERT_TRUE(fs::exists(tiled_turns)) << "the run in bands wrote no rotation texture";
+  const Image a = ReadImageFile(whole_turns, PixelEncoding::kLinear), b = ReadImageFile(tiled_turns, PixelEncoding::kLinear);
+  ASSERT_EQ(a.pixel_count(), b.pixel_count());
+  // One turn per cluster gives at most as many values as clusters; the pixels' own turns give one a pixel.
+  auto distinct = [](const Image& turns) {
+    std::set<float> values(turns.plane(0).begin(), turns.plane(0).end());
+    return values.size();
+  };
+  const std::size_t clusters = static_cast<std::size_t>(OptionsForPreset(Preset::kFast).fit.clustering.cluster_count);
+  EXPECT_GT(distinct(a), 2 * clusters);
+  EXPECT_GT(distinct(b), 2 * clusters) << "the bands' pixels kept their clusters' turns only";
+  // The same turn as one band's (the clusters come from a sample in bands: measured 2880 of 2880).
+  constexpr double kSameTurnDeg = 5.0;
+  constexpr double kMinSameShare = 0.95;
+  std::size_t same = 0;
+  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
+    const double d = std::fmod(std::abs(a.plane(0)[i] - b.plane(0)[i]), 180.0);
+    same += std::min(d, 180.0 - d) < kSameTurnDeg ? 1 : 0;
+  }
+  EXPECT_GE(static_cast<double>(same), kMinSameShare * static_cast<double>(a.pixel_count()));
 }
 
 }  // namespace
