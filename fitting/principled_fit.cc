@@ -214,8 +214,9 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
 }
 
 // The usable observations of pixel `index` in its reconstruction normal's frame, the tangent
-// turned by the pixel's own turn only (PixelTurn); returns their number (at most stack.observations.size(), the size `out` must have).
-// Also the reflectance ratios (luminance / (cos_l E)) into `ratios` when non-null.
+// turned by the pixel's own turn only (PixelTurn); returns their number (at most
+// stack.observations.size(), the size `out` must have). Also the reflectance ratios
+// (luminance / (cos_l E)) into `ratios` when non-null.
 int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* out, float* ratios) {
   return GatherPixelWithNormal(context, index, GeometryNormal(context, index), 0.0, out, ratios);
 }

@@ -123,7 +123,8 @@ TEST(FibreTurnFromNormals, AnIsotropicReliefKeepsMostPixelsUnturned) {
   constexpr double kAmplitudeMm = 0.02, kPeriodMm = 0.16;
   const double k = 2.0 * kPi / kPeriodMm;
   const Image normals = NormalsOf([&](double x, double y) {
-    return Eigen::Vector2d(kAmplitudeMm * k * std::cos(k * x) * std::sin(k * y), kAmplitudeMm * k * std::sin(k * x) * std::cos(k * y));
+    return Eigen::Vector2d(kAmplitudeMm * k * std::cos(k * x) * std::sin(k * y),
+                           kAmplitudeMm * k * std::sin(k * x) * std::cos(k * y));
   });
   FibreDirectionOptions wide;
   wide.window_px = 4.0;  // a window over about half a period
