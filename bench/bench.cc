@@ -193,6 +193,7 @@ BenchRow RunCase(const BenchCase& c, const BenchOptions& options) {
   if (c.camera_per_map > 1) args.insert(args.end(), {"--dpi", Fixed(c.MapsDpi(), 0)});
   args.insert(args.end(), {"--ps-supersample", std::to_string(c.ps_supersample)});  // the case's, not the default
   args.insert(args.end(), {"--level", c.level});
+  if (c.follow_fibres) args.push_back("--follow-fibres");
   if (options.threads > 0) args.insert(args.end(), {"--threads", std::to_string(options.threads)});
   const fs::path log_path = run_dir.string() + ".log";
   const ChildResult child = RunChild(args, log_path);
@@ -265,6 +266,7 @@ std::string BenchCase::RunId() const {
   if (maps_at_camera_dpi && camera_per_map > 1) id += "_maps" + Fixed(MapsDpi(), 0) + "dpi";
   if (ps_supersample != 1) id += "_pss" + std::to_string(ps_supersample);
   if (level != "plane") id += "_level-" + level;
+  if (follow_fibres) id += "_fibres";
   if (!hold_out_lights.empty()) {
     std::string ids = hold_out_lights;
     std::replace(ids.begin(), ids.end(), ',', '-');
@@ -398,6 +400,15 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
         add(c);
       }
     }
+    // The fabrics whose stretch turns within a cluster (a lace's cord round its motif, a satin's
+    // floats, a twill's warp) with --follow-fibres, beside their runs above.
+    for (const char* scene : {"satin", "lace", "twill"}) {
+      BenchCase c{scene, "distant", base, 0, true, "balanced", "", "", "fibres", "", ""};
+      c.camera_per_map = 4;
+      c.ps_supersample = 0;
+      c.follow_fibres = true;
+      add(c);
+    }
   }
   // Needs less: the same scene without calibration frames (no dark, flat, sphere, board, chart).
   add({"plain", "distant", base, 0, false, quick ? "fast" : "balanced", "", "", "needs-less", "", ""});
@@ -421,7 +432,7 @@ std::vector<BenchCase> BenchMatrix(const BenchOptions& options) {
 
 std::vector<std::string> BenchCsvColumns() {
   return {"group", "scene", "rig", "size_px", "camera_per_map", "maps_dpi", "ps_supersample", "level", "megapixels", "lights", "calibration_frames", "sensor_noise", "preset", "solver", "integrator",
-          "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
+          "fit_mode", "follow_fibres", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
           "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
           "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
           "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
@@ -440,7 +451,8 @@ void WriteBenchCsv(const std::vector<BenchRow>& rows, const fs::path& path) {
     std::vector<std::string> cells = {
         r.c.group, r.c.scene, r.c.rig, std::to_string(r.c.size_px), std::to_string(r.c.camera_per_map), Fixed(r.c.MapsDpi(), 0),
         std::to_string(r.c.ps_supersample), r.c.level, v(r.megapixels, 4), std::to_string(r.lights_used),
-        r.c.calibration_frames ? "yes" : "no", r.c.sensor_noise ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.fit_mode_used, r.status,
+        r.c.calibration_frames ? "yes" : "no", r.c.sensor_noise ? "yes" : "no", r.c.preset, r.solver_used, r.integrator_used, r.fit_mode_used,
+        r.c.follow_fibres ? "yes" : "no", r.status,
         Fixed(r.wall_s, 3), v(r.total_s, 3), Fixed(r.peak_rss_mib, 1), v(r.stages.read, 3), v(r.stages.calibration, 3),
         v(r.stages.rectify, 3), v(r.stages.alpha, 3), v(r.stages.photometric_stereo, 3), v(r.stages.integration, 3),
         v(r.stages.fit, 3), v(r.stages.write, 3), Join(r.skipped, "; "), v(e.normal_mean_deg, 3),
@@ -639,6 +651,34 @@ std::string CameraFinerSection(const std::vector<BenchRow>& rows) {
   return s.str();
 }
 
+// Fibre directions: each --follow-fibres run against the run of the same capture, preset and grid
+// without it (the camera-finer group's).
+std::string FibresSection(const std::vector<BenchRow>& rows) {
+  std::ostringstream s;
+  s << "\n## Fibre directions (`--follow-fibres`) against one turn per cluster\n\n| capture | preset | follow fibres | "
+       "total s | fit s | normal mean deg | roughness err | specular err | anisotropic err | re-render % |\n"
+       "|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const BenchRow& r : rows) {
+    if (r.c.group != "fibres" || r.status != "ok") continue;
+    const BenchRow* without = nullptr;
+    for (const BenchRow& x : rows) {
+      if (x.c.CaptureId() == r.c.CaptureId() && x.c.preset == r.c.preset && x.c.ps_supersample == r.c.ps_supersample &&
+          x.c.level == r.c.level && x.c.hold_out_lights.empty() && !x.c.follow_fibres && x.status == "ok") {
+        without = &x;
+      }
+    }
+    auto line = [&](const BenchRow& x) {
+      s << "| " << x.c.CaptureId() << " | " << x.c.preset << " | " << (x.c.follow_fibres ? "yes" : "no") << " | "
+        << Fixed(x.total_s, 2) << " | " << Fixed(x.stages.fit, 2) << " | " << Fixed(x.evaluation.normal_mean_deg, 3) << " | "
+        << ParameterCell(x, 0) << " | " << ParameterCell(x, 1) << " | " << ParameterCell(x, 5) << " | "
+        << Fixed(100.0 * x.evaluation.rerender_relative_rmse, 2) << " |\n";
+    };
+    if (without) line(*without);
+    line(r);
+  }
+  return s.str();
+}
+
 // Needs less: steps skipped and the time they save.
 std::string NeedsLessSection(const std::vector<BenchRow>& rows) {
   std::ostringstream s;
@@ -679,7 +719,7 @@ void WriteBenchMarkdown(const std::vector<BenchRow>& rows, const BenchOptions& o
     << "process` in MiB; errors against the synthetic truth (docs/bench.md).\n\n";
   s << EveryRunSection(rows) << IssueTargetsSection(rows) << PresetsSection(rows) << MethodsSection(rows)
     << FitModeSection(rows) << HeldOutSection(rows) << ModelMismatchSection(rows) << CameraFinerSection(rows)
-    << NeedsLessSection(rows);
+    << FibresSection(rows) << NeedsLessSection(rows);
   s << "\nPlots: `error_vs_time.svg`, `rerender_vs_time.svg`, `time_vs_megapixels.svg`, `time_vs_lights.svg`.\n";
   WriteTextFileAtomically(path, s.str(), "a writable output folder");
 }

@@ -53,6 +53,9 @@ struct BenchCase {
   // u3mscan process --level: none | plane (the default) | quadratic (docs/process.md, "Levelling");
   // group "camera-finer" runs plain with quadratic too.
   std::string level = "plane";
+  // u3mscan process --follow-fibres: the anisotropic stretch turned per pixel along the fibres the
+  // normals show (docs/fitting.md, "Fibre directions from the relief"); group "fibres".
+  bool follow_fibres = false;
   double MapsDpi() const;         // the finished maps' dpi: 300, or the camera's with maps_at_camera_dpi
   std::string CaptureId() const;  // the capture a case runs on (shared by presets and methods)
   std::string RunId() const;

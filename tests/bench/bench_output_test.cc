@@ -256,7 +256,48 @@ TEST(BenchMatrix, QuickCoversPresetsRigsMethodsNeedsLessAndHeldOut) {
   for (const BenchCase& c : cases) {
     EXPECT_DOUBLE_EQ(c.MapsDpi(), 300.0) << c.RunId();
     EXPECT_TRUE(c.sensor_noise) << c.RunId();
+    EXPECT_FALSE(c.follow_fibres) << c.RunId();
   }
+  // --follow-fibres on the 4x satin, lace and twill, each beside its camera-finer run without it.
+  std::set<std::string> fibres, full_ids;
+  for (const BenchCase& c : full) full_ids.insert(c.RunId());
+  for (const BenchCase& c : full) {
+    EXPECT_EQ(c.follow_fibres, c.group == "fibres") << c.RunId();
+    if (!c.follow_fibres) continue;
+    fibres.insert(c.RunId());
+    BenchCase without = c;
+    without.follow_fibres = false;
+    EXPECT_TRUE(full_ids.count(without.RunId())) << "no run to compare " << c.RunId() << " with";
+  }
+  EXPECT_EQ(fibres, (std::set<std::string>{"satin_distant_128_cam4x_balanced_pss0_fibres",
+                                           "lace_distant_128_cam4x_balanced_pss0_fibres",
+                                           "twill_distant_128_cam4x_balanced_pss0_fibres"}));
+}
+
+// The fibres table puts each --follow-fibres run under its run without, on the same capture.
+TEST(BenchWriters, FibresTableComparesEachRunWithItsRunWithout) {
+  BenchRow without;
+  without.c = {"lace", "distant", 128, 0, true, "balanced", "", "", "camera-finer", "", ""};
+  without.c.camera_per_map = 4;
+  without.c.ps_supersample = 0;
+  without.evaluation.parameters.resize(7);
+  without.evaluation.parameters[5] = {"anisotropic", "anisotropy_value", "map", true, true, 0.19, 0.0, 0.189, -0.189};
+  BenchRow with = without;
+  with.c.group = "fibres";
+  with.c.follow_fibres = true;
+  with.evaluation.parameters[5].mean_abs_error = 0.156;
+  const test::TempDir temp;
+  WriteBenchMarkdown({with, without}, BenchOptions(), temp.path() / "bench.md");
+  const std::string md = ReadText(temp.path() / "bench.md");
+  const std::size_t table = md.find("## Fibre directions");
+  ASSERT_NE(table, std::string::npos) << md;
+  const std::size_t no = md.find("| lace_distant_128_cam4x | balanced | no |", table);
+  const std::size_t yes = md.find("| lace_distant_128_cam4x | balanced | yes |", table);
+  ASSERT_NE(no, std::string::npos) << md.substr(table);
+  ASSERT_NE(yes, std::string::npos) << md.substr(table);
+  EXPECT_LT(no, yes) << "the run without first";
+  EXPECT_NE(md.find("0.1890", no), std::string::npos);
+  EXPECT_NE(md.find("0.1560", yes), std::string::npos);
 }
 
 }  // namespace

@@ -12,7 +12,7 @@ from pathlib import Path
 
 EXPECTED_COLUMNS = [
     "group", "scene", "rig", "size_px", "camera_per_map", "maps_dpi", "ps_supersample", "level", "megapixels", "lights", "calibration_frames", "sensor_noise", "preset", "solver", "integrator",
-    "fit_mode", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
+    "fit_mode", "follow_fibres", "status", "wall_s", "total_s", "peak_rss_mib", "read_s", "calibration_s", "rectify_s", "alpha_s",
     "photometric_stereo_s", "integration_s", "fit_s", "write_s", "steps_skipped", "normal_mean_deg",
     "normal_median_deg", "normal_p95_deg", "albedo_de2000", "base_color_de2000", "height_rmse_mm",
     "height_rmse_pct", "height_levelled_rmse_pct", "roughness_err", "specular_err", "specular_tint_err", "sheen_err", "sheen_tint_err",
