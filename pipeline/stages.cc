@@ -275,11 +275,13 @@ void ReportFitStep(const fitting::FitResult& fit, std::string detail, double sec
   report->steps.push_back({"fit", true, detail, seconds});
 }
 
+Image FibreTurnsIfFollowed(const Image& normals, const StageOptions& options) {
+  return options.follow_fibres ? FibreTurnFromNormals(normals, options.fibre_directions) : Image();
+}
+
 fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
                                      const StageOptions& options) {
-  fitting::SurfaceGeometry surface{normals, albedo, height_mm, Image()};
-  if (options.follow_fibres) surface.fibre_turn_deg = FibreTurnFromNormals(normals, options.fibre_directions);
-  return surface;
+  return {normals, albedo, height_mm, FibreTurnsIfFollowed(normals, options)};
 }
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,

@@ -74,8 +74,11 @@ bool HasPointLights(const Stack& stack);
 void ReportObliqueView(const Stack& stack, RunReport* report);
 void ReportFitStep(const fitting::FitResult& fit, std::string detail, double seconds, RunReport* report);
 
-// The fit's geometry: the given maps, and with options.follow_fibres each pixel's turn along the
-// fibres its normals show (pipeline/fibre_direction.h).
+// Each pixel's turn along the fibres `normals` show (pipeline/fibre_direction.h) with
+// options.follow_fibres; empty without.
+Image FibreTurnsIfFollowed(const Image& normals, const StageOptions& options);
+
+// The fit's geometry: the given maps and their FibreTurnsIfFollowed.
 fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
                                      const StageOptions& options);
 

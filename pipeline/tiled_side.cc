@@ -11,7 +11,6 @@
 #include "core/logging.h"
 #include "fitting/tiled_fit.h"
 #include "pipeline/fine_colour.h"
-#include "pipeline/fibre_direction.h"
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
@@ -338,8 +337,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_ps.albedo, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
         if (options.follow_fibres) {
-          SampleRows(FibreTurnFromNormals(band_ps.normal, options.fibre_directions), solved.Row0(b), fine_step,
-                     fine_sample_grid, &fine_sample_geometry.fibre_turn_deg);
+          SampleRows(FibreTurnsIfFollowed(band_ps.normal, options), solved.Row0(b), fine_step, fine_sample_grid,
+                     &fine_sample_geometry.fibre_turn_deg);
         }
       }
       if (role.keep_fine && fine_factor > 1) {
@@ -671,17 +670,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     // The fibres' turns of a band, from its own normals (within the window's reach of a band edge,
     // a few fine rows, they differ slightly from one band's).
-    if (options.follow_fibres) surface.fibre_turn_deg = FibreTurnFromNormals(surface.normals, options.fibre_directions);
+    surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
     return surface;
   };
+  // The fibres' turns on the maps' grid (StageOptions::follow_fibres): its normals are whole, so
+  // they are read once, as one band reads them, and cropped or sampled like the normals.
+  const Image maps_turns = FibreTurnsIfFollowed(geometry.photometric_stereo.normal, options);
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
   // solved them; its heights from the whole fine grid's.
-  // The fibres' turns on the maps' grid (StageOptions::follow_fibres): its normals are whole, so
-  // they are read once, as one band reads them, and cropped or sampled like the normals.
-  const Image maps_turns = options.follow_fibres
-                               ? FibreTurnFromNormals(geometry.photometric_stereo.normal, options.fibre_directions)
-                               : Image();
   fitting::SurfaceGeometry sample_geometry;
   if (clusters_on_fine_grid) {
     if (!fine_sample_gathered) {
