@@ -20,6 +20,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
   struct Args {
     std::string capture, out, side = "front", preset = "balanced", fit_mode;
     double dpi = 0.0;
+    bool follow_fibres = false;
   };
   auto args = std::make_shared<Args>();
   sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
@@ -32,6 +33,9 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
                  "Override the preset's fit: clusters (cluster values only) | per-pixel (refined per pixel)")
       ->check(CLI::IsMember({"clusters", "per-pixel"}));
   sub.add_option("--dpi", args->dpi, "Resolution of the maps (default: the manifest's)")->check(CLI::Range(1.0, 10000.0));
+  sub.add_flag("--follow-fibres", args->follow_fibres,
+               "Turn the anisotropic stretch per pixel along the fibres the normals show, as `process "
+               "--follow-fibres` does (docs/fitting.md, Fibre directions from the relief)");
   sub.footer(
       "Runs calibration and reconstruction first. Writes DIR/maps/<parameter>.exr for every measured\n"
       "parameter (roughness, specular, ...; base_color linear RGB) and DIR/fit.json. Parameters the\n"
@@ -41,6 +45,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     StageOptions stages = OptionsForPreset(ParsePreset(args->preset));
     if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
     if (!args->fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(args->fit_mode);
+    stages.follow_fibres = args->follow_fibres;
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());

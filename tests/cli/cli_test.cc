@@ -7,8 +7,12 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <set>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
+#include "u3m/image_io.h"
 #include "u3m/material.h"
 #include "u3m/material_json.h"
 
@@ -171,6 +175,30 @@ TEST_F(Cli, ConvertKeepsForeignCustomSectionsOfTheSamples) {
   EXPECT_EQ(custom.members().size(), 2u);
   EXPECT_EQ(custom.members()[0].first, "Browzwear");
   EXPECT_EQ(custom.members()[1].first, "Vizoo");
+}
+
+// `fit --follow-fibres` on a satin whose stretch the near rig's 16 lights measure: the rotation
+// is then each pixel's (a texture with more values than the fit has clusters); without the option
+// one turn per cluster.
+TEST_F(Cli, FitFollowsTheFibresWhenAsked) {
+  ASSERT_EQ(U3mscan("synth --scene satin --rig near --size 80x64 --no-calibration --format tiff -o " + Path("satin")).exit_code, 0);
+  auto distinct_turns = [&](const std::string& out) {
+    const Image turns = ReadImageFile(dir_ / out / "maps" / "anisotropy_rotation.exr", PixelEncoding::kLinear);
+    return std::set<float>(turns.plane(0).begin(), turns.plane(0).end()).size();
+  };
+  const RunResult with = U3mscan("fit " + Path("satin/capture") + " -o " + Path("with") + " --preset fast --follow-fibres");
+  ASSERT_EQ(with.exit_code, 0) << with.output;
+  ASSERT_TRUE(fs::exists(dir_ / "with/maps/anisotropy_rotation.exr")) << with.output;
+  const RunResult without = U3mscan("fit " + Path("satin/capture") + " -o " + Path("without") + " --preset fast");
+  ASSERT_EQ(without.exit_code, 0) << without.output;
+  auto clusters = [&](const std::string& out) {
+    std::ifstream in(dir_ / out / "fit.json");
+    return nlohmann::json::parse(in)["clusters"].size();
+  };
+  EXPECT_GT(distinct_turns("with"), clusters("with"));
+  if (fs::exists(dir_ / "without/maps/anisotropy_rotation.exr")) {
+    EXPECT_LE(distinct_turns("without"), clusters("without"));
+  }
 }
 
 TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
