@@ -82,4 +82,30 @@ Image FibreTurnFromNormals(const Image& normals, const FibreDirectionOptions& op
   return turn;
 }
 
+Image AverageTurnsOntoMaps(const Image& fine_turns, int k, double maps_pitch_mm) {
+  if (k < 1 || fine_turns.channels() != 1 || fine_turns.width() % k != 0 || fine_turns.height() % k != 0) {
+    throw std::invalid_argument("AverageTurnsOntoMaps: a 1-channel map whose sides are multiples of k >= 1");
+  }
+  const int w = fine_turns.width() / k, h = fine_turns.height() / k;
+  Image out(w, h, 1, 0.0f, maps_pitch_mm);
+  constexpr double kDegToDoubledRad = 2.0 * M_PI / 180.0;
+  ParallelFor(static_cast<std::size_t>(h), [&](std::size_t begin, std::size_t end) {
+    for (auto row = static_cast<int>(begin); row < static_cast<int>(end); ++row) {
+      for (int col = 0; col < w; ++col) {
+        double c = 0.0, s = 0.0;
+        for (int j = 0; j < k; ++j) {
+          for (int i = 0; i < k; ++i) {
+            const double a = fine_turns.at(0, row * k + j, col * k + i) * kDegToDoubledRad;
+            c += std::cos(a);
+            s += std::sin(a);
+          }
+        }
+        if (std::hypot(c, s) < 1e-6 * k * k) continue;
+        out.at(0, row, col) = static_cast<float>(fitting::WrapHalfTurnDeg(0.5 * std::atan2(s, c) * kRadToDeg));
+      }
+    }
+  });
+  return out;
+}
+
 }  // namespace u3mscan

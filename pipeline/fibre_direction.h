@@ -39,4 +39,13 @@ struct FibreDirectionOptions {
 // blurred copy).
 Image FibreTurnFromNormals(const Image& normals, const FibreDirectionOptions& options = {});
 
+// The turns of a grid k times finer averaged onto the maps' grid (pitch `maps_pitch_mm`): each map
+// pixel the circular mean of its k x k fine turns as doubled angles (a stretch repeats every 180
+// degrees), 0 where they cancel. A map pixel's observations mix its fine pixels', each fitted in its
+// own frame, so this is the frame their cluster turn was fitted on top of; the maps' grid's own
+// normals may not resolve the fibres at all (a satin's floats, 1.9 px wide at 300 dpi, read no
+// coherent direction there). Throws std::invalid_argument for k < 1, a map that is not 1 channel or
+// sides that are not multiples of k.
+Image AverageTurnsOntoMaps(const Image& fine_turns, int k, double maps_pitch_mm);
+
 }  // namespace u3mscan

@@ -195,10 +195,14 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
   const int k = fine.k;
-  const fitting::SurfaceGeometry surface =
-      FitGeometry(geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo, geometry.height_mm, options);
   const fitting::SurfaceGeometry fine_surface = FitGeometry(
       fine.side.photometric_stereo.normal, fine.side.photometric_stereo.albedo, fine.side.height_mm, options);
+  // The maps' grid's fibre turns are the fine grid's, averaged (fibre_direction.h).
+  const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                         geometry.height_mm,
+                                         fine_surface.fibre_turn_deg.empty()
+                                             ? Image()
+                                             : AverageTurnsOntoMaps(fine_surface.fibre_turn_deg, k, stack.grid.pitch_mm)};
   // FitPrincipled's stages (tiled_fit.h): the clusters on the fine grid (its stack holds the maps'
   // observations in the same order, so the model serves both grids), then the per-pixel step on the
   // maps' grid for the written maps and once more on the fine grid for the normals.

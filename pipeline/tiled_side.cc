@@ -245,6 +245,15 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   Stack fine_sample;
   fitting::SurfaceGeometry fine_sample_geometry;  // its normals and albedo (the heights once integrated)
   bool fine_sample_gathered = false;
+  // With --follow-fibres: each fine band's fibre turns (from its normals) go into that sample and,
+  // averaged onto the maps (fibre_direction.h), into the maps' grid's turns, as one band takes them.
+  Image fine_turns_on_maps;
+  auto add_fine_turns = [&](const Image& band_turns, int row0) {
+    if (band_turns.empty()) return;
+    SampleRows(band_turns, row0, fine_step, fine_sample_grid, &fine_sample_geometry.fibre_turn_deg);
+    if (fine_turns_on_maps.empty()) fine_turns_on_maps = Image(grid.width, grid.height, 1, 0.0f, grid.pitch_mm);
+    PasteRows(AverageTurnsOntoMaps(band_turns, fine_factor, grid.pitch_mm), row0 / fine_factor, &fine_turns_on_maps);
+  };
   // The last sweep's fine normals and albedo, kept whole for the fit's fine pass (24 B a fine pixel)
   // so that it does not solve every fine band once more (the 36 MP plain's fine pass of the fit
   // 588 -> 395 s, docs/process.md). Kept when the last sweep is known before it runs
@@ -336,10 +345,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         AddToSample(band, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_ps.normal, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_ps.albedo, solved.Row0(b), fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
-        if (options.follow_fibres) {
-          SampleRows(FibreTurnsIfFollowed(band_ps.normal, options), solved.Row0(b), fine_step, fine_sample_grid,
-                     &fine_sample_geometry.fibre_turn_deg);
-        }
+        add_fine_turns(FibreTurnsIfFollowed(band_ps.normal, options), solved.Row0(b));
       }
       if (role.keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
@@ -673,9 +679,6 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
     return surface;
   };
-  // The fibres' turns on the maps' grid (StageOptions::follow_fibres): its normals are whole, so
-  // they are read once, as one band reads them, and cropped or sampled like the normals.
-  const Image maps_turns = FibreTurnsIfFollowed(geometry.photometric_stereo.normal, options);
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
   // solved them; its heights from the whole fine grid's.
@@ -689,16 +692,20 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         AddToSample(band, row0, fine_step, fine_sample_grid, &fine_sample);
         SampleRows(band_surface.normals, row0, fine_step, fine_sample_grid, &fine_sample_geometry.normals);
         SampleRows(band_surface.albedo, row0, fine_step, fine_sample_grid, &fine_sample_geometry.albedo);
-        if (!band_surface.fibre_turn_deg.empty()) {
-          SampleRows(band_surface.fibre_turn_deg, row0, fine_step, fine_sample_grid, &fine_sample_geometry.fibre_turn_deg);
-        }
+        add_fine_turns(band_surface.fibre_turn_deg, row0);
         ReportProgress(progress, "fit: sample on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
       }
     }
     sample_geometry = std::move(fine_sample_geometry);
     SampleRows(fine_surface_height, 0, fine_step, fine_sample_grid, &sample_geometry.height_mm);
     out.sample = std::move(fine_sample);
-  } else {
+  }
+  // The fibres' turns on the maps' grid (StageOptions::follow_fibres), read on whole maps as one
+  // band reads them, then cropped or sampled like the normals: the fine bands' averaged (above),
+  // else (no fine grid, or the clusters on the maps' grid) the maps' own normals'.
+  const Image maps_turns = !fine_turns_on_maps.empty() ? std::move(fine_turns_on_maps)
+                                                       : FibreTurnsIfFollowed(geometry.photometric_stereo.normal, options);
+  if (!clusters_on_fine_grid) {
     SampleRows(geometry.photometric_stereo.normal, 0, step, sample_grid, &sample_geometry.normals);
     SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
     SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);

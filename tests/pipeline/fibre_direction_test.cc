@@ -134,6 +134,28 @@ TEST(FibreTurnFromNormals, AnIsotropicReliefKeepsMostPixelsUnturned) {
   EXPECT_GT(unturned, kSize * kSize / 2);
 }
 
+// Turns averaged onto a grid k times coarser as stretches (doubled angles): 10 and 170 degrees are
+// 20 apart across the half turn and average to 0, not to their arithmetic 90.
+TEST(AverageTurnsOntoMaps, AveragesStretchesAcrossTheHalfTurn) {
+  constexpr int kFine = 3;
+  Image fine(2 * kFine, kFine, 1, 0.0f, kPitchMm / kFine);
+  for (int row = 0; row < kFine; ++row) {
+    for (int col = 0; col < kFine; ++col) {
+      fine.at(0, row, col) = 40.0f;                                // the first map pixel: one direction
+      fine.at(0, row, kFine + col) = col % 2 == 0 ? 10.0f : 170.0f;  // the second: either side of 0
+    }
+  }
+  const Image maps = AverageTurnsOntoMaps(fine, kFine, kPitchMm);
+  ASSERT_EQ(maps.width(), 2);
+  ASSERT_EQ(maps.height(), 1);
+  EXPECT_EQ(maps.pitch_mm(), kPitchMm);
+  EXPECT_NEAR(maps.at(0, 0, 0), 40.0, 1e-4);
+  const double second = maps.at(0, 0, 1);
+  EXPECT_LT(std::min(second, 180.0 - second), 5.0) << second;  // 5 at 10 and 4 at 170: about 1.1
+  EXPECT_THROW(AverageTurnsOntoMaps(Image(4, 3, 1), 3, kPitchMm), std::invalid_argument);
+  EXPECT_THROW(AverageTurnsOntoMaps(Image(3, 3, 3), 3, kPitchMm), std::invalid_argument);
+}
+
 TEST(FibreTurnFromNormals, RefusesAMapWithoutThreeChannelsAndInvalidOptions) {
   EXPECT_THROW(FibreTurnFromNormals(Image(8, 8, 1, 0.0f, kPitchMm)), std::invalid_argument);
   FibreDirectionOptions bad;
