@@ -660,13 +660,13 @@ std::string FibresSection(const std::vector<BenchRow>& rows) {
        "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const BenchRow& r : rows) {
     if (r.c.group != "fibres" || r.status != "ok") continue;
-    const BenchRow* without = nullptr;
-    for (const BenchRow& x : rows) {
-      if (x.c.CaptureId() == r.c.CaptureId() && x.c.preset == r.c.preset && x.c.ps_supersample == r.c.ps_supersample &&
-          x.c.level == r.c.level && x.c.hold_out_lights.empty() && !x.c.follow_fibres && x.status == "ok") {
-        without = &x;
-      }
-    }
+    // The same case but the option: the same run id without its "_fibres".
+    BenchCase same = r.c;
+    same.follow_fibres = false;
+    const std::string id = same.RunId();
+    const auto it =
+        std::find_if(rows.begin(), rows.end(), [&](const BenchRow& x) { return x.status == "ok" && x.c.RunId() == id; });
+    const BenchRow* without = it != rows.end() ? &*it : nullptr;
     auto line = [&](const BenchRow& x) {
       s << "| " << x.c.CaptureId() << " | " << x.c.preset << " | " << (x.c.follow_fibres ? "yes" : "no") << " | "
         << Fixed(x.total_s, 2) << " | " << Fixed(x.stages.fit, 2) << " | " << Fixed(x.evaluation.normal_mean_deg, 3) << " | "
