@@ -190,6 +190,26 @@ TEST(MaterialJson, AnisotropyRotationWrapsIntoOneTurnFor11) {
   EXPECT_DOUBLE_EQ(j.Find("material")->Find("front")->Find("anisotropy_rotation")->Find("constant")->number(), 0.75);
 }
 
+// A 1.1 rotation within the reader's bound in turns leaves it in 1.0's degrees: the writer refuses
+// it, naming the field, rather than write a file that does not read back (fuzz_u3m_json's crash).
+TEST(MaterialJson, WriterRefusesANumberItsReaderWouldRefuse) {
+  Material m = ReadMaterialJson(Inline10(), "a.u3m").material;
+  m.front->anisotropy_rotation.constant = 422175765.0 * 360.0;  // as read from 422175765 turns
+  MaterialWriteOptions force10;
+  force10.version = SchemaVersion::k1_0;
+  try {
+    WriteMaterialJson(m, force10, "o.u3m");
+    ADD_FAILURE() << "a constant of 1.5e11 was written";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/material/front/anisotropy_rotation/constant"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("1e9"), std::string::npos) << e.what();
+  }
+  // 1.1 wraps the rotation into one turn: that material is written.
+  MaterialWriteOptions force11;
+  force11.version = SchemaVersion::k1_1;
+  EXPECT_NO_THROW(WriteMaterialJson(m, force11, "o.u3m"));
+}
+
 struct Malformed {
   std::string name;
   std::string text;
