@@ -45,6 +45,21 @@ constexpr double kNormalConvergedTilt = 1e-5;
 constexpr double kMinStepScale = 0.3;
 // Largest number of parameters the per-pixel step refines (roughness, specular).
 constexpr int kMaxPixelParameters = 2;
+// A per-pixel prior std below this holds the cluster's value (the pixels share it within noise).
+constexpr double kMinPixelPriorStd = 1e-3;
+// The spread estimate (ClusterPixelPriorStd): each sample's own value under a prior this wide (the
+// parameter's whole range), in at least this many Gauss-Newton steps, from at least this many
+// samples whose own std is below FitOptions::pixel_max_std (fewer: FitOptions::pixel_prior_std).
+constexpr double kSpreadEstimatePriorStd = 1.0;
+constexpr int kSpreadEstimateIterations = 3;
+constexpr std::size_t kMinSpreadSamples = 8;
+
+// Whether the per-pixel step refines `parameter` of a cluster that measures `measured`.
+bool RefinedPerPixel(const FitOptions& options, const ParameterMask& measured, int parameter) {
+  if (parameter == kRoughness) return measured[kRoughness];
+  if (parameter == kSpecular) return measured[kSpecular] && options.refine_specular_per_pixel;
+  return false;
+}
 
 // Per-observation constants of the stack.
 struct ObservationInfo {
@@ -363,18 +378,23 @@ int PixelFeatures(const FitContext& context, std::size_t index, PixelBuffers& bu
 }
 
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
-// cluster value (prior std options.pixel_prior_std). Damped Gauss-Newton with forward differences;
+// cluster value with prior std `prior_std[parameter]` (a parameter whose prior std is below
+// kMinPixelPriorStd keeps the cluster value). Damped Gauss-Newton with forward differences;
 // residual buffers come from the caller. Returns how many parameters were kept; their posterior
 // std goes to (*kept_sd)[parameter] (others untouched). `color` receives the closed-form base
 // colour at the returned parameters (saves a solve).
 int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options, const ParameterMask& measured,
-                double luminance_start, const ParameterVector& cluster, ParameterVector& params,
-                std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac, Eigen::Vector3d* color,
-                ParameterVector* kept_sd) {
+                const ParameterVector& prior_std, double luminance_start, const ParameterVector& cluster,
+                ParameterVector& params, std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac,
+                Eigen::Vector3d* color, ParameterVector* kept_sd) {
   int index[kMaxPixelParameters];
+  double prior_w[kMaxPixelParameters];
   int k = 0;
-  if (measured[kRoughness]) index[k++] = kRoughness;
-  if (measured[kSpecular] && options.refine_specular_per_pixel) index[k++] = kSpecular;
+  for (int parameter : {kRoughness, kSpecular}) {
+    if (!RefinedPerPixel(options, measured, parameter) || !(prior_std[parameter] >= kMinPixelPriorStd)) continue;
+    prior_w[k] = 1.0 / (prior_std[parameter] * prior_std[parameter]);
+    index[k++] = parameter;
+  }
   const PixelCostSettings settings = CostSettingsFor(options, cluster, measured, luminance_start);
   if (k == 0) {
     *color = SolveBaseColor(params, obs, settings);
@@ -384,10 +404,9 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
   r0.resize(m);
   r1.resize(m);
   jac.resize(m * k);
-  const double prior_w = 1.0 / (options.pixel_prior_std * options.pixel_prior_std);
   auto total = [&](const ParameterVector& p, std::vector<double>& r, Eigen::Vector3d* c_out) {
     double c = PixelResiduals(p, obs, settings, r.data(), c_out);
-    for (int a = 0; a < k; ++a) c += 0.5 * prior_w * (p[index[a]] - cluster[index[a]]) * (p[index[a]] - cluster[index[a]]);
+    for (int a = 0; a < k; ++a) c += 0.5 * prior_w[a] * (p[index[a]] - cluster[index[a]]) * (p[index[a]] - cluster[index[a]]);
     return c;
   };
   // Fixed-size normal equations (no allocation per pixel); unused rows are identity.
@@ -415,8 +434,8 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
       }
       double s = 0.0;
       for (std::size_t i = 0; i < m; ++i) s += jac[a * m + i] * r0[i];
-      g(a) = s + prior_w * (params[index[a]] - cluster[index[a]]);
-      h(a, a) += prior_w;
+      g(a) = s + prior_w[a] * (params[index[a]] - cluster[index[a]]);
+      h(a, a) += prior_w[a];
     }
     // No step where even the best case cannot pin the value down (cheap stage: skip early).
     const Matrix2 covariance = h.inverse();
@@ -465,6 +484,49 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     *color = start_color;
   }
   return kept;
+}
+
+// ClusterFit::pixel_prior_std of a cluster at its final `params` (empirical Bayes): how far its
+// pixels' own values spread beyond their noise. Each sample's value x and std s come from
+// RefinePixel under a prior too wide to matter; a sample counts where s < options.pixel_max_std
+// (where the per-pixel step would keep its value). The spread is sqrt(max(0, mean((x - value)^2 -
+// s^2))), at most options.pixel_prior_std; with fewer than kMinSpreadSamples such samples, or with
+// options.pixel_prior_from_samples off, options.pixel_prior_std. Why: one prior for every cluster
+// either writes a uniform fabric's noise into its map (plain, velvet at 4x) or holds a fabric whose
+// threads differ back to the cluster's value (denim's warp, 0.74-0.96).
+ParameterVector ClusterPixelPriorStd(const ClusterSamples& samples, const ParameterVector& params,
+                                     const ParameterMask& measured, double luminance_start, const FitOptions& options) {
+  ParameterVector prior{};
+  for (int i = 0; i < kFitParameterCount; ++i) prior[i] = RefinedPerPixel(options, measured, i) ? options.pixel_prior_std : 0.0;
+  if (!options.pixel_prior_from_samples || options.mode != FitMode::kPerPixel) return prior;
+  FitOptions wide = options;
+  wide.pixel_prior_std = kSpreadEstimatePriorStd;
+  wide.pixel_max_std = std::numeric_limits<double>::infinity();
+  wide.pixel_iterations = std::max(options.pixel_iterations, kSpreadEstimateIterations);
+  ParameterVector wide_prior{};
+  for (int i = 0; i < kFitParameterCount; ++i) wide_prior[i] = prior[i] > 0.0 ? kSpreadEstimatePriorStd : 0.0;
+  std::vector<double> r0, r1, jac;
+  ParameterVector excess{};  // sum of (x - value)^2 - s^2
+  std::array<std::size_t, kFitParameterCount> counted{};
+  for (std::size_t p = 0; p < samples.pixels(); ++p) {
+    const std::span<const LocalObservation> obs = samples.pixel(p);
+    if (obs.size() < 2 * kMaxPixelParameters) continue;
+    ParameterVector x = params;
+    ParameterVector sd;
+    sd.fill(-1.0);
+    Eigen::Vector3d color;
+    RefinePixel(obs, wide, measured, wide_prior, luminance_start, params, x, r0, r1, jac, &color, &sd);
+    for (int i = 0; i < kFitParameterCount; ++i) {
+      if (!(sd[i] >= 0.0) || !(sd[i] < options.pixel_max_std)) continue;
+      excess[i] += (x[i] - params[i]) * (x[i] - params[i]) - sd[i] * sd[i];
+      ++counted[i];
+    }
+  }
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    if (prior[i] == 0.0 || counted[i] < kMinSpreadSamples) continue;
+    prior[i] = std::min(options.pixel_prior_std, std::sqrt(std::max(0.0, excess[i] / static_cast<double>(counted[i]))));
+  }
+  return prior;
 }
 
 }  // namespace
@@ -799,6 +861,21 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
     }
   }
 
+  // How far each cluster's pixels spread beyond their noise: the per-pixel step's prior.
+  ParallelFor(static_cast<std::size_t>(k), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c < end; ++c) {
+      ClusterFit& f = model.clusters[c];
+      ParameterVector params;
+      ParameterMask measured{};
+      for (int i = 0; i < kFitParameterCount; ++i) {
+        params[i] = ValueInMaps(model, f, i);
+        measured[i] = f.parameters[i].measured;
+      }
+      f.pixel_prior_std = ClusterPixelPriorStd(samples[c], params, measured,
+                                               std::max(kMinStartLuminance, Luminance(f.mean_base_color)), options);
+    }
+  });
+
   model.clustering = clustering;
   // Which maps exist: a parameter measured in at least one cluster (elsewhere it holds its default).
   for (int i = 0; i < kFitParameterCount; ++i) {
@@ -928,8 +1005,8 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
             count >= 2 * kMaxPixelParameters) {
           ParameterVector kept_sd;
           kept_sd.fill(-1.0);
-          if (RefinePixel(obs, options, cluster_measured[c], cluster_luminance[c], cluster_params[c], params, r0, r1,
-                          jac, &color, &kept_sd) > 0) {
+          if (RefinePixel(obs, options, cluster_measured[c], model.clusters[c].pixel_prior_std, cluster_luminance[c],
+                          cluster_params[c], params, r0, r1, jac, &color, &kept_sd) > 0) {
             ++local_refined;
             // The pixel's own uncertainty replaces the cluster's in the pooled uncertainty.
             for (int i = 0; i < kFitParameterCount; ++i) {

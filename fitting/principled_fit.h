@@ -125,6 +125,12 @@ struct FitOptions {
   bool refine_specular_per_pixel = false;
   double pixel_prior_std = 0.1;      // regularisation toward the cluster value (parameter units)
   double pixel_max_std = 0.05;       // a pixel's value is kept only if its posterior std is below this
+  // The regularisation from the cluster's own spread (empirical Bayes): each cluster's prior std
+  // per refined parameter is the spread its pixels show beyond their noise, estimated on its samples
+  // (ClusterFit::pixel_prior_std), at most pixel_prior_std. A cluster whose pixels share one value
+  // then holds it instead of writing their noise into the map; one whose threads differ follows
+  // them (docs/fitting.md, "Per-pixel spread from the samples"). Off: pixel_prior_std everywhere.
+  bool pixel_prior_from_samples = true;
   // Screen: a pixel is refined only if its largest reflectance ratio exceeds its median one by
   // 1 / (1 - this), i.e. it shows a highlight of at least this share.
   double pixel_min_specular_fraction = 0.1;
@@ -187,6 +193,11 @@ struct ClusterFit {
   // (below FitOptions::normal_refinement_tolerance_deg when it converged).
   int normal_passes = 0;
   double normal_change_deg = 0.0;
+  // Prior std (parameter units) of the per-pixel step toward the cluster's value, per parameter it
+  // refines (roughness; specular with FitOptions::refine_specular_per_pixel; 0 for the others):
+  // sqrt(max(0, mean over samples of (x - value)^2 - s^2)), x a sample's own estimate and s its
+  // std, capped at FitOptions::pixel_prior_std (FitOptions::pixel_prior_from_samples).
+  ParameterVector pixel_prior_std{};
   bool converged = false;
   std::string message;               // Ceres termination / failure text
 };

@@ -28,6 +28,11 @@ json MapJson(const fitting::MapReport& m, const char* u3m_key, const char* unit 
 }
 
 json ClusterJson(const fitting::ClusterFit& f) {
+  // The per-pixel step's prior std toward the cluster's value, for the parameters it refines.
+  json pixel_prior_std = json::object();
+  for (int i = 0; i < kFitParameterCount; ++i) {
+    if (f.pixel_prior_std[i] > 0.0) pixel_prior_std[fitting::FitParameterName(i)] = FiniteOrNull<json>(f.pixel_prior_std[i]);
+  }
   json parameters = json::object();
   for (int i = 0; i < kFitParameterCount; ++i) {
     const fitting::ParameterEstimate& e = f.parameters[i];
@@ -48,6 +53,7 @@ json ClusterJson(const fitting::ClusterFit& f) {
           {"saturated_share", FiniteOrNull<json>(f.saturated_share)},
           {"highlight_share", FiniteOrNull<json>(f.highlight_share)},
           {"anisotropy_rotation_deg", FiniteOrNull<json>(f.anisotropy_rotation_deg)},
+          {"pixel_prior_std", pixel_prior_std},
           {"mean_base_color_linear",
            {FiniteOrNull<json>(f.mean_base_color(0)), FiniteOrNull<json>(f.mean_base_color(1)), FiniteOrNull<json>(f.mean_base_color(2))}},
           {"message", f.message},
@@ -109,6 +115,8 @@ json FitResultToJson(const fitting::FitResult& result) {
             {"observability_max_std", FiniteOrNull<json>(o.observability.max_std)},
             {"observability_effective_pixels", o.observability.effective_pixels},
             {"fit_anisotropy_rotation", o.fit_anisotropy_rotation},
+            {"pixel_prior_std", FiniteOrNull<json>(o.pixel_prior_std)},
+            {"pixel_prior_from_samples", o.pixel_prior_from_samples},
             {"mode", fitting::FitModeName(o.mode)},
             {"seed", o.clustering.seed}}}};
 }

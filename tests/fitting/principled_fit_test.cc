@@ -173,6 +173,15 @@ Stack WithoutLights(const Stack& stack, const std::set<int>& held_out) {
   return out;
 }
 
+// Sensor-like noise: each value times 1 + N(0, relative), from a fixed seed.
+void AddRelativeNoise(double relative, unsigned seed, Stack* stack) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(relative));
+  for (Observation& o : stack->observations) {
+    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
+  }
+}
+
 class PrincipledFitTest : public ::testing::Test {
  protected:
   void SetUp() override { SetLogLevel(LogLevel::kWarning); }
@@ -369,13 +378,12 @@ TEST_F(PrincipledFitTest, NoisyUniformSampleIsConstantNotNoise) {
     return p;
   };
   Scene scene = MakeScene(spec);
-  std::mt19937 rng(31);
-  std::normal_distribution<float> noise(0.0f, static_cast<float>(kHighNoiseRelative));
-  for (Observation& o : scene.stack.observations) {
-    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
-  }
+  AddRelativeNoise(kHighNoiseRelative, 31, &scene.stack);
   FitOptions options;
   options.noise_relative = kHighNoiseRelative;  // the operator's noise model matches the sensor
+  // One prior for every cluster: with the prior from the clusters' spread the pixels would hold
+  // their cluster's value and leave the map rule nothing to do (AClusterOfOneValueHoldsIt...).
+  options.pixel_prior_from_samples = false;
   const FitResult result = FitPrincipled(scene.stack, scene.geometry, options);
   MaybePrint("NoisyUniformSampleIsConstantNotNoise", result);
   EXPECT_TRUE(result.convergence.messages.empty()) << "noise alone is not a model mismatch";
@@ -567,11 +575,7 @@ TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
   const Scene scene = MakeScene(spec);
   const std::set<int> held_out = {1, 6, 11, 18};
   Stack noisy = WithoutLights(scene.stack, held_out);
-  std::mt19937 rng(23);
-  std::normal_distribution<float> noise(0.0f, static_cast<float>(kNoiseRelative));
-  for (Observation& o : noisy.observations) {
-    for (float& v : o.rgb.data()) v *= 1.0f + noise(rng);
-  }
+  AddRelativeNoise(kNoiseRelative, 23, &noisy);
   FitOptions options;
   options.samples_per_cluster = 48;  // noisy solves iterate long; keep the test fast
   const FitResult result = FitPrincipled(noisy, scene.geometry, options);
@@ -598,6 +602,92 @@ TEST_F(PrincipledFitTest, NoisyCaptureMeetsTheIssueTargets) {
               << MeanAbsError(scene, result, FitParameter::kSheenTint) << "; worst held-out relative RMSE "
               << worst_rmse << "\n";
   }
+}
+
+// The per-pixel step's prior from each cluster's own spread (FitOptions::pixel_prior_from_samples,
+// docs/fitting.md "Per-pixel spread from the samples"). Two fabrics, each of one roughness, under
+// 2 % noise: each cluster's estimated spread is near 0, so its pixels hold its value instead of
+// writing their noise into the map; with one prior std of 0.1 for every cluster they scatter.
+constexpr double kSpreadTestNoise = 0.02;
+// A cluster of one value: the spread found beyond the noise (parameter units).
+constexpr double kUniformClusterSpread = 0.01;
+
+TEST_F(PrincipledFitTest, AClusterOfOneValueHoldsItInsteadOfItsPixelsNoise) {
+  SceneSpec spec;
+  spec.lights_deg = OverheadLights();
+  spec.material = [&](int col, int row) { return TwoFabrics(col, row, spec.width, false); };
+  Scene scene = MakeScene(spec);
+  AddRelativeNoise(kSpreadTestNoise, 11, &scene.stack);
+  FitOptions one_prior;
+  one_prior.pixel_prior_from_samples = false;
+  const FitResult with_spread = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  const FitResult with_one_prior = FitPrincipled(scene.stack, scene.geometry, one_prior);
+  MaybePrint("AClusterOfOneValueHoldsItInsteadOfItsPixelsNoise", with_spread);
+  ExpectFinite(with_spread);
+  for (const ClusterFit& c : with_spread.clusters) {
+    if (!c.parameters[kRoughness].measured) continue;
+    EXPECT_LT(c.pixel_prior_std[kRoughness], kUniformClusterSpread) << "cluster " << c.id;
+  }
+  for (const ClusterFit& c : with_one_prior.clusters) {
+    if (!c.parameters[kRoughness].measured) continue;
+    EXPECT_EQ(c.pixel_prior_std[kRoughness], one_prior.pixel_prior_std) << "cluster " << c.id;
+  }
+  const double error = MeanAbsError(scene, with_spread, FitParameter::kRoughness);
+  const double one_prior_error = MeanAbsError(scene, with_one_prior, FitParameter::kRoughness);
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "roughness mean |error|: prior from the clusters' spread " << error << ", one prior " << one_prior_error << "\n";
+  }
+  EXPECT_LT(error, 0.5 * one_prior_error) << "the pixels' noise is not written into the map";
+}
+
+// A matte fabric whose threads differ in roughness (a denim's warp, 0.74-0.96 in the synthetic
+// scanner's scene) on a nearly flat sample: one cluster by appearance. Its samples show the spread,
+// so the per-pixel step follows the threads.
+TEST_F(PrincipledFitTest, AClusterWhosePixelsDifferFollowsThem) {
+  constexpr double kSmoothThread = 0.74, kRoughThread = 0.96;
+  // Relative, per channel: a broad lobe's pixel is pinned to within its spread only at low noise
+  // (a 4x camera's map pixel averages 16 camera pixels' noise).
+  constexpr double kThreadTestNoise = 0.005;
+  SceneSpec spec;
+  spec.width = 24;
+  spec.height = 24;
+  spec.bump_amplitude_mm = 0.01;
+  spec.lights_deg = OverheadLights();
+  spec.material = [](int col, int) {
+    PrincipledParams<double> p;
+    p.base_color = Eigen::Vector3d(0.12, 0.16, 0.30);
+    p.roughness = (col / 2) % 2 == 0 ? kSmoothThread : kRoughThread;  // threads 2 px wide
+    p.specular = 0.4;
+    return p;
+  };
+  Scene scene = MakeScene(spec);
+  AddRelativeNoise(kThreadTestNoise, 7, &scene.stack);
+  const FitResult result = FitPrincipled(scene.stack, scene.geometry, FitOptions());
+  MaybePrint("AClusterWhosePixelsDifferFollowsThem", result);
+  ExpectFinite(result);
+  ASSERT_TRUE(result.report(FitParameter::kRoughness).measured);
+  for (const ClusterFit& c : result.clusters) {
+    if (!c.parameters[kRoughness].measured) continue;
+    EXPECT_GT(c.pixel_prior_std[kRoughness], 0.25 * (kRoughThread - kSmoothThread)) << "cluster " << c.id;
+  }
+  const Image& roughness = result.map(FitParameter::kRoughness);
+  ASSERT_FALSE(roughness.empty()) << "two thread roughnesses 0.22 apart are not a constant";
+  double sum[2] = {0.0, 0.0};
+  int n[2] = {0, 0};
+  for (int row = 0; row < spec.height; ++row) {
+    for (int col = 0; col < spec.width; ++col) {
+      const int rough = (col / 2) % 2;
+      sum[rough] += roughness.at(0, row, col);
+      ++n[rough];
+    }
+  }
+  const double smooth_mean = sum[0] / n[0], rough_mean = sum[1] / n[1];
+  if (std::getenv("U3MSCAN_FIT_PRINT_JSON") != nullptr) {
+    std::cout << "threads: roughness mean " << smooth_mean << " for " << kSmoothThread << ", " << rough_mean << " for "
+              << kRoughThread << "; mean |error| " << MeanAbsError(scene, result, FitParameter::kRoughness) << "\n";
+  }
+  EXPECT_GT(rough_mean - smooth_mean, 0.5 * (kRoughThread - kSmoothThread)) << "the map follows the threads";
+  EXPECT_LT(MeanAbsError(scene, result, FitParameter::kRoughness), kTargetRoughnessError);
 }
 
 // Model mismatch (the issue asks for the same figures): the render's sheen is Charlie sheen, which

@@ -32,6 +32,7 @@ TEST(FitJson, HoldsTheDecisionsTheClustersAndTheOptionsAsTheyWere) {
   cluster.parameters[kRoughness] = {0.41, 0.002, true, "", true, ""};
   cluster.parameters[kSheen] = {0.0, std::numeric_limits<double>::infinity(), false, "no grazing light", true, ""};
   cluster.message = std::string("tab\there, bell\x07, quote \" and backslash \\");
+  cluster.pixel_prior_std[kRoughness] = 0.004;  // the per-pixel step's prior; 0 elsewhere
   result.clusters.push_back(cluster);
   result.convergence.messages = {"cluster 3: likely model mismatch"};
   result.times.total_s = 1.5;
@@ -57,10 +58,14 @@ TEST(FitJson, HoldsTheDecisionsTheClustersAndTheOptionsAsTheyWere) {
   EXPECT_EQ(j["clusters"][0]["message"], cluster.message);
   EXPECT_EQ(j["clusters"][0]["parameters"]["roughness"]["std"], 0.002);
   EXPECT_TRUE(j["clusters"][0]["parameters"]["sheen"]["std"].is_null()) << "an infinite std";
+  EXPECT_EQ(j["clusters"][0]["pixel_prior_std"], nlohmann::json({{"roughness", 0.004}}))
+      << "only the parameters the per-pixel step refines";
   EXPECT_EQ(j["convergence"]["messages"][0], "cluster 3: likely model mismatch");
   EXPECT_EQ(j["times_s"]["total"], 1.5);
   EXPECT_EQ(j["options"]["robust_loss"], "cauchy");
   EXPECT_EQ(j["options"]["mode"], fitting::FitModeName(result.options.mode));
+  EXPECT_EQ(j["options"]["pixel_prior_from_samples"], result.options.pixel_prior_from_samples);
+  EXPECT_EQ(j["options"]["pixel_prior_std"], result.options.pixel_prior_std);
 }
 
 }  // namespace
