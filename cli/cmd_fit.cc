@@ -21,6 +21,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     std::string capture, out, side = "front", preset = "balanced", fit_mode;
     double dpi = 0.0;
     bool follow_fibres = false;
+    bool one_pixel_prior = false;
   };
   auto args = std::make_shared<Args>();
   sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
@@ -36,6 +37,9 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
   sub.add_flag("--follow-fibres", args->follow_fibres,
                "Turn the anisotropic stretch per pixel along the fibres the normals show, as `process "
                "--follow-fibres` does (docs/fitting.md, Fibre directions from the relief)");
+  sub.add_flag("--one-pixel-prior", args->one_pixel_prior,
+               "Regularise every pixel toward its cluster with one prior std (0.1), not with the spread each "
+               "cluster's samples show (for comparisons; docs/fitting.md, Per-pixel spread from the samples)");
   sub.footer(
       "Runs calibration and reconstruction first. Writes DIR/maps/<parameter>.exr for every measured\n"
       "parameter (roughness, specular, ...; base_color linear RGB) and DIR/fit.json. Parameters the\n"
@@ -46,6 +50,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;
     if (!args->fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(args->fit_mode);
     stages.follow_fibres = args->follow_fibres;
+    if (args->one_pixel_prior) stages.fit.pixel_prior_from_samples = false;
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());

@@ -201,6 +201,31 @@ TEST_F(Cli, FitFollowsTheFibresWhenAsked) {
   }
 }
 
+// `fit --one-pixel-prior`: every cluster that measures roughness regularises its pixels with the
+// one prior std; by default fit.json says the prior came from the clusters' own spread.
+TEST_F(Cli, FitTakesOnePixelPriorWhenAsked) {
+  ASSERT_EQ(U3mscan("synth --scene plain --rig near --size 48x48 --no-calibration --format tiff -o " + Path("plain")).exit_code, 0);
+  const RunResult one = U3mscan("fit " + Path("plain/capture") + " -o " + Path("one") + " --one-pixel-prior");
+  ASSERT_EQ(one.exit_code, 0) << one.output;
+  const RunResult own = U3mscan("fit " + Path("plain/capture") + " -o " + Path("own"));
+  ASSERT_EQ(own.exit_code, 0) << own.output;
+  auto fit_json = [&](const std::string& out) {
+    std::ifstream in(dir_ / out / "fit.json");
+    return nlohmann::json::parse(in);
+  };
+  const nlohmann::json with_one = fit_json("one"), with_own = fit_json("own");
+  EXPECT_FALSE(with_one["options"]["pixel_prior_from_samples"].get<bool>());
+  EXPECT_TRUE(with_own["options"]["pixel_prior_from_samples"].get<bool>());
+  const double one_prior = with_one["options"]["pixel_prior_std"].get<double>();
+  int measuring = 0;
+  for (const nlohmann::json& cluster : with_one["clusters"]) {
+    if (!cluster["parameters"]["roughness"]["measured"].get<bool>()) continue;
+    ++measuring;
+    EXPECT_EQ(cluster["pixel_prior_std"]["roughness"].get<double>(), one_prior) << cluster.dump();
+  }
+  EXPECT_GT(measuring, 0) << "the plain weave's roughness is measured on the near rig";
+}
+
 TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
   const RunResult too_big = U3mscan("synth-ball --size 96x80 --radius 60 -o " + Path("ball"));
   EXPECT_EQ(too_big.exit_code, 2) << too_big.output;
