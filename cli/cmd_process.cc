@@ -82,6 +82,9 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "Turn the anisotropic stretch per pixel along the fibres the normals show (a lace's cord round its "
                "motif, a satin's floats), each cluster's rotation fitted on top; the rotation is then a texture "
                "(docs/fitting.md, Fibre directions from the relief)");
+  sub.add_flag("--one-pixel-prior", args->options.one_pixel_prior,
+               "Regularise every pixel toward its cluster with one prior std (0.1), not with the spread each "
+               "cluster's samples show (for comparisons; docs/fitting.md, Per-pixel spread from the samples)");
   sub.add_option("--level", args->options.levelling,
                  "The sample's low-order shape taken out of the height map: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "

@@ -43,6 +43,9 @@ struct ProcessOptions {
   // Turn the fit's shading frame per pixel along the fibres the normals show
   // (StageOptions::follow_fibres).
   bool follow_fibres = false;
+  // One prior std toward the cluster's value for every pixel (fitting::FitOptions::pixel_prior_std)
+  // instead of each cluster's own spread (pixel_prior_from_samples off; for comparisons).
+  bool one_pixel_prior = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
   // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need
   // bands (--max-memory) are refused with them.

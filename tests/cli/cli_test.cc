@@ -202,8 +202,9 @@ TEST_F(Cli, FitFollowsTheFibresWhenAsked) {
 }
 
 // `fit --one-pixel-prior`: every cluster that measures roughness regularises its pixels with the
-// one prior std; by default fit.json says the prior came from the clusters' own spread.
-TEST_F(Cli, FitTakesOnePixelPriorWhenAsked) {
+// one prior std; by default fit.json says the prior came from the clusters' own spread. `process`
+// takes the same switch and reports it.
+TEST_F(Cli, FitAndProcessTakeOnePixelPriorWhenAsked) {
   ASSERT_EQ(U3mscan("synth --scene plain --rig near --size 48x48 --no-calibration --format tiff -o " + Path("plain")).exit_code, 0);
   const RunResult one = U3mscan("fit " + Path("plain/capture") + " -o " + Path("one") + " --one-pixel-prior");
   ASSERT_EQ(one.exit_code, 0) << one.output;
@@ -224,6 +225,15 @@ TEST_F(Cli, FitTakesOnePixelPriorWhenAsked) {
     EXPECT_EQ(cluster["pixel_prior_std"]["roughness"].get<double>(), one_prior) << cluster.dump();
   }
   EXPECT_GT(measuring, 0) << "the plain weave's roughness is measured on the near rig";
+  // `process` takes the same switch and says which prior it ran with in report.json.
+  auto process_prior = [&](const std::string& out, const std::string& extra) {
+    const RunResult run = U3mscan("process " + Path("plain/capture") + " -o " + Path(out) + " --preset fast" + extra);
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    std::ifstream in(dir_ / out / "report.json");
+    return nlohmann::json::parse(in)["options"]["pixel_prior_from_samples"];
+  };
+  EXPECT_EQ(process_prior("process_one", " --one-pixel-prior"), false);
+  EXPECT_EQ(process_prior("process_own", ""), true);
 }
 
 TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
