@@ -54,6 +54,11 @@ constexpr double kSpreadEstimatePriorStd = 1.0;
 constexpr int kSpreadEstimateIterations = 3;
 constexpr std::size_t kMinSpreadSamples = 8;
 
+// The luminance a cluster's per-pixel colour solves start from: its samples' mean base colour's.
+double StartLuminance(const ClusterFit& cluster) {
+  return std::max(kMinStartLuminance, Luminance(cluster.mean_base_color));
+}
+
 // Whether the per-pixel step refines `parameter` of a cluster that measures `measured`.
 bool RefinedPerPixel(const FitOptions& options, const ParameterMask& measured, int parameter) {
   if (parameter == kRoughness) return measured[kRoughness];
@@ -825,54 +830,43 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
 
   // Reliability of what the clusters measured (FitOptions, "Reliability"): evidence that the value
   // may be off by more than its posterior std, which assumes the model fits and the data cover it.
-  for (int c = 0; c < k; ++c) {
-    ClusterFit& f = model.clusters[c];
-    ParameterVector params;
-    ParameterMask measured{};
-    for (int i = 0; i < kFitParameterCount; ++i) {
-      const ParameterEstimate& e = f.parameters[i];
-      params[i] = ValueInMaps(model, f, i);
-      measured[i] = e.measured;
-    }
-    f.highlight_share = HighlightShare(samples[c], params, measured, options);
-    // A metal's specular lobe does not depend on `specular`: the highlight test does not apply.
-    const bool metal = measured[kMetallic] && params[kMetallic] > 0.0;
-    char misfit[240], no_highlight[300];
-    std::snprintf(misfit, sizeof misfit,
-                  "the model explains this cluster's data only to a relative RMS residual of %.3g (> %.3g): the value "
-                  "is likely biased by more than its posterior std",
-                  f.rms_relative_residual, MismatchThreshold(options));
-    std::snprintf(no_highlight, sizeof no_highlight,
-                  "no usable highlight: %.0f %% of the cluster's samples (< %.0f %%) have an observation in which the "
-                  "fitted specular lobe carries %.1f %% of the signal, and %.0f %% of their observations are saturated; "
-                  "the value is inferred from the highlights' absence (they fall between the lights or clip)",
-                  100.0 * f.highlight_share, 100.0 * options.min_highlight_share, 100.0 * options.highlight_lobe_fraction,
-                  100.0 * f.saturated_share);
-    for (int i = 0; i < kFitParameterCount; ++i) {
-      ParameterEstimate& e = f.parameters[i];
-      if (!e.measured) continue;
-      if (f.rms_relative_residual > MismatchThreshold(options)) {
-        e.reliable = false;
-        e.unreliable_reason = misfit;
-      } else if ((i == kRoughness || i == kSpecular) && !metal && f.highlight_share < options.min_highlight_share) {
-        e.reliable = false;
-        e.unreliable_reason = no_highlight;
-      }
-    }
-  }
-
-  // How far each cluster's pixels spread beyond their noise: the per-pixel step's prior.
+  // And how far each cluster's pixels spread beyond their noise: the per-pixel step's prior.
   ParallelFor(static_cast<std::size_t>(k), [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c < end; ++c) {
       ClusterFit& f = model.clusters[c];
       ParameterVector params;
       ParameterMask measured{};
       for (int i = 0; i < kFitParameterCount; ++i) {
+        const ParameterEstimate& e = f.parameters[i];
         params[i] = ValueInMaps(model, f, i);
-        measured[i] = f.parameters[i].measured;
+        measured[i] = e.measured;
       }
-      f.pixel_prior_std = ClusterPixelPriorStd(samples[c], params, measured,
-                                               std::max(kMinStartLuminance, Luminance(f.mean_base_color)), options);
+      f.highlight_share = HighlightShare(samples[c], params, measured, options);
+      // A metal's specular lobe does not depend on `specular`: the highlight test does not apply.
+      const bool metal = measured[kMetallic] && params[kMetallic] > 0.0;
+      char misfit[240], no_highlight[300];
+      std::snprintf(misfit, sizeof misfit,
+                    "the model explains this cluster's data only to a relative RMS residual of %.3g (> %.3g): the value "
+                    "is likely biased by more than its posterior std",
+                    f.rms_relative_residual, MismatchThreshold(options));
+      std::snprintf(no_highlight, sizeof no_highlight,
+                    "no usable highlight: %.0f %% of the cluster's samples (< %.0f %%) have an observation in which the "
+                    "fitted specular lobe carries %.1f %% of the signal, and %.0f %% of their observations are saturated; "
+                    "the value is inferred from the highlights' absence (they fall between the lights or clip)",
+                    100.0 * f.highlight_share, 100.0 * options.min_highlight_share, 100.0 * options.highlight_lobe_fraction,
+                    100.0 * f.saturated_share);
+      for (int i = 0; i < kFitParameterCount; ++i) {
+        ParameterEstimate& e = f.parameters[i];
+        if (!e.measured) continue;
+        if (f.rms_relative_residual > MismatchThreshold(options)) {
+          e.reliable = false;
+          e.unreliable_reason = misfit;
+        } else if ((i == kRoughness || i == kSpecular) && !metal && f.highlight_share < options.min_highlight_share) {
+          e.reliable = false;
+          e.unreliable_reason = no_highlight;
+        }
+      }
+      f.pixel_prior_std = ClusterPixelPriorStd(samples[c], params, measured, StartLuminance(f), options);
     }
   });
 
@@ -936,7 +930,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
       cluster_params[c][i] = ValueInMaps(model, model.clusters[c], i);
       cluster_measured[c][i] = e.measured;
     }
-    cluster_luminance[c] = std::max(kMinStartLuminance, Luminance(model.clusters[c].mean_base_color));
+    cluster_luminance[c] = StartLuminance(model.clusters[c]);
   }
   if (tally->cluster_pixels.size() != static_cast<std::size_t>(k)) tally->cluster_pixels.assign(k, 0);
 

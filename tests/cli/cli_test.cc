@@ -60,6 +60,11 @@ class Cli : public ::testing::Test {
     fs::remove_all(dir_, ignored);
   }
   std::string Path(const std::string& name) const { return Quote((dir_ / name).string()); }
+  // A JSON file the run wrote (fit.json, report.json), parsed.
+  nlohmann::json ReadJson(const std::string& name) const {
+    std::ifstream in(dir_ / name);
+    return nlohmann::json::parse(in);
+  }
   fs::path dir_;
 };
 
@@ -191,10 +196,7 @@ TEST_F(Cli, FitFollowsTheFibresWhenAsked) {
   ASSERT_TRUE(fs::exists(dir_ / "with/maps/anisotropy_rotation.exr")) << with.output;
   const RunResult without = U3mscan("fit " + Path("satin/capture") + " -o " + Path("without") + " --preset fast");
   ASSERT_EQ(without.exit_code, 0) << without.output;
-  auto clusters = [&](const std::string& out) {
-    std::ifstream in(dir_ / out / "fit.json");
-    return nlohmann::json::parse(in)["clusters"].size();
-  };
+  auto clusters = [&](const std::string& out) { return ReadJson(out + "/fit.json")["clusters"].size(); };
   EXPECT_GT(distinct_turns("with"), clusters("with"));
   if (fs::exists(dir_ / "without/maps/anisotropy_rotation.exr")) {
     EXPECT_LE(distinct_turns("without"), clusters("without"));
@@ -210,11 +212,7 @@ TEST_F(Cli, FitAndProcessTakeOnePixelPriorWhenAsked) {
   ASSERT_EQ(one.exit_code, 0) << one.output;
   const RunResult own = U3mscan("fit " + Path("plain/capture") + " -o " + Path("own"));
   ASSERT_EQ(own.exit_code, 0) << own.output;
-  auto fit_json = [&](const std::string& out) {
-    std::ifstream in(dir_ / out / "fit.json");
-    return nlohmann::json::parse(in);
-  };
-  const nlohmann::json with_one = fit_json("one"), with_own = fit_json("own");
+  const nlohmann::json with_one = ReadJson("one/fit.json"), with_own = ReadJson("own/fit.json");
   EXPECT_FALSE(with_one["options"]["pixel_prior_from_samples"].get<bool>());
   EXPECT_TRUE(with_own["options"]["pixel_prior_from_samples"].get<bool>());
   const double one_prior = with_one["options"]["pixel_prior_std"].get<double>();
@@ -229,8 +227,7 @@ TEST_F(Cli, FitAndProcessTakeOnePixelPriorWhenAsked) {
   auto process_prior = [&](const std::string& out, const std::string& extra) {
     const RunResult run = U3mscan("process " + Path("plain/capture") + " -o " + Path(out) + " --preset fast" + extra);
     EXPECT_EQ(run.exit_code, 0) << run.output;
-    std::ifstream in(dir_ / out / "report.json");
-    return nlohmann::json::parse(in)["options"]["pixel_prior_from_samples"];
+    return ReadJson(out + "/report.json")["options"]["pixel_prior_from_samples"];
   };
   EXPECT_EQ(process_prior("process_one", " --one-pixel-prior"), false);
   EXPECT_EQ(process_prior("process_own", ""), true);
