@@ -106,14 +106,25 @@ Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observatio
     const PrincipledParams<T> params = ToPrincipled(p, probe);
     T num[3] = {T(0), T(0), T(0)};
     T den[3] = {T(0), T(0), T(0)};
+    // A facet run's A and s are the sums over its entries (the model is linear in C per entry).
+    T run_a = T(0), run_s = T(0);
     for (std::size_t i = 0; i < n; ++i) {
       const LocalObservation& o = observations[i];
       const Vec3<T> l = o.light_local.cast<T>();
       const Vec3<T> v = o.view_local.cast<T>();
       const Vec3<T> f = EvaluatePrincipled(params, l, v);
-      const double geometry = o.light_local.z() * o.irradiance;  // cos_l * E
-      const T a = (f(0) - f(1)) * (T(brdf::kTintLumR) * geometry) / luminance;
-      const T s = f(1) * geometry;
+      const double geometry = o.light_local.z() * o.irradiance * o.facet_weight;  // cos_l * E * share
+      run_a += (f(0) - f(1)) * (T(brdf::kTintLumR) * geometry) / luminance;
+      run_s += f(1) * geometry;
+      if (o.continues) {  // no data here: residual slots 0
+        scratch[2 * i] = T(0);
+        scratch[2 * i + 1] = T(0);
+        continue;
+      }
+      const T a = run_a;
+      const T s = run_s;
+      run_a = T(0);
+      run_s = T(0);
       scratch[2 * i] = a;
       scratch[2 * i + 1] = s;
       for (int c = 0; c < 3; ++c) {
@@ -262,6 +273,24 @@ bool EvaluateNormalTiltJacobian(const ParameterVector& params, std::span<const L
     for (int r = 0; r < m; ++r) (*jacobian)(r, axis) = (plus[r] - minus[r]) / (2.0 * kNormalTiltStepRad);
   }
   return jacobian->allFinite();
+}
+
+int CountMeasurements(std::span<const LocalObservation> observations) {
+  return static_cast<int>(std::count_if(observations.begin(), observations.end(),
+                                        [](const LocalObservation& o) { return !o.continues; }));
+}
+
+Eigen::Vector3d RenderRun(const ParameterVector& params, const Eigen::Vector3d& base_color,
+                          std::span<const LocalObservation> observations, std::size_t begin, std::size_t* end) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  std::size_t i = begin;
+  for (; i < observations.size(); ++i) {
+    const LocalObservation& o = observations[i];
+    sum += o.facet_weight * RenderLocal(params, base_color, o.light_local, o.view_local, o.irradiance);
+    if (!o.continues) break;
+  }
+  *end = std::min(i + 1, observations.size());
+  return sum;
 }
 
 Eigen::Vector3d RenderLocal(const ParameterVector& params, const Eigen::Vector3d& base_color,

@@ -67,13 +67,26 @@ ParameterVector DefaultParameters();
 
 // One usable observation of one pixel, already in the pixel's local shading frame. Fixed size, so
 // per-pixel work can reuse one buffer per worker instead of allocating.
+//
+// Facet runs (fitting/facet_mixture.h): an observation that a tilted camera made of several facets
+// is a run of consecutive entries, one per facet, each with the light and view turned into that
+// facet's frame (the pixel's frame turned by the facet's tilt) and its share `facet_weight`. Every
+// entry of the run but the last has `continues` set and carries no data (rgb and weight 0); the
+// last carries the measurement. The cost predicts the run as sum over its entries of facet_weight *
+// f * cos_l * E and forms its residual at the last entry; the continued entries keep their three
+// residual slots, always 0, so that every count of residuals stays 3 per entry.
 struct LocalObservation {
   Eigen::Vector3d light_local = Eigen::Vector3d::UnitZ();  // unit, toward the light, z = normal
   Eigen::Vector3d view_local = Eigen::Vector3d::UnitZ();   // unit, toward the camera
   double irradiance = 1.0;                                 // relative irradiance before the cosine
   Eigen::Vector3d rgb = Eigen::Vector3d::Zero();           // measurement, linear RGB
   Eigen::Vector3d weight = Eigen::Vector3d::Ones();        // 1 / sigma per channel
+  double facet_weight = 1.0;  // share of the prediction of its run (1: a plain observation)
+  bool continues = false;     // the next entry belongs to the same observation (a facet run)
 };
+
+// Number of measurements among `observations` (entries that end a run, see LocalObservation).
+int CountMeasurements(std::span<const LocalObservation> observations);
 
 enum class RobustLossKind { kNone, kHuber, kCauchy };
 
@@ -129,7 +142,11 @@ bool EvaluateNormalTiltJacobian(const ParameterVector& params, std::span<const L
                                 const PixelCostSettings& settings, std::vector<LocalObservation>& scratch,
                                 Eigen::MatrixXd* jacobian);
 
-// Rendered value of one observation: f * cos_l * E in linear RGB (0 below either horizon).
+// Rendered value of one entry: f * cos_l * E in linear RGB (0 below either horizon), facet_weight
+// not applied. RenderRun sums a whole run (a plain observation alone): facet_weight times RenderLocal
+// over its entries, starting at `observations[begin]`; `*end` gets the index past the run.
+Eigen::Vector3d RenderRun(const ParameterVector& params, const Eigen::Vector3d& base_color,
+                          std::span<const LocalObservation> observations, std::size_t begin, std::size_t* end);
 Eigen::Vector3d RenderLocal(const ParameterVector& params, const Eigen::Vector3d& base_color,
                             const Eigen::Vector3d& light_local, const Eigen::Vector3d& view_local,
                             double irradiance);

@@ -218,6 +218,68 @@ TEST(BrdfCost, TheCauchyLossOfANearlyExactObservationIsFiniteAndQuadratic) {
   EXPECT_GT(in_the_rounding_band, 0) << "the data must reach the band where log(1 + s / a^2) rounds to 0";
 }
 
+// Each observation of `plain` (made by Render) as a facet run of three facets tilted about the
+// local x axis by the given angles (a tilted facet sees every direction turned back), its data the
+// weighted sum of the facets' renders with `p` and `color`.
+std::vector<LocalObservation> AsFacetRuns(const std::vector<LocalObservation>& plain, const ParameterVector& p,
+                                          const Eigen::Vector3d& color) {
+  const double tilts_deg[] = {-15.0, 5.0, 20.0};
+  const double shares[] = {0.2, 0.5, 0.3};
+  std::vector<LocalObservation> runs;
+  for (const LocalObservation& o : plain) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (int f = 0; f < 3; ++f) {
+      const Eigen::Matrix3d back = Eigen::AngleAxisd(-tilts_deg[f] * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix();
+      LocalObservation e = o;
+      e.light_local = back * o.light_local;
+      e.view_local = back * o.view_local;
+      e.facet_weight = shares[f];
+      e.continues = f < 2;
+      sum += shares[f] * RenderLocal(p, color, e.light_local, e.view_local, e.irradiance);
+      if (e.continues) {
+        e.rgb.setZero();
+        e.weight.setZero();
+      }
+      runs.push_back(e);
+    }
+    runs.back().rgb = sum;
+  }
+  return runs;
+}
+
+TEST(BrdfCost, AFacetRunIsPredictedAsTheWeightedSumOfItsFacets) {
+  const Eigen::Vector3d color(0.4, 0.3, 0.2);
+  const ParameterVector p = Params(0.45, 0.6, 0.0, 0.7, 0.0, 0.0, 0.0);
+  const std::vector<LocalObservation> plain = Render(p, color, 0.0, 3);
+  const std::vector<LocalObservation> runs = AsFacetRuns(plain, p, color);
+  EXPECT_EQ(CountMeasurements(runs), static_cast<int>(plain.size()));
+  EXPECT_EQ(CountMeasurements(plain), static_cast<int>(plain.size()));
+  PixelCostSettings settings;
+  const Eigen::Vector3d solved = SolveBaseColor(p, runs, settings);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(solved(c), color(c), kColorTolerance);
+  std::vector<double> r(3 * runs.size());
+  EXPECT_LT(PixelResiduals(p, runs, settings, r.data()), kColorTolerance);
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    if (!runs[i].continues) continue;
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(r[3 * i + c], 0.0) << "a continued entry has no residual of its own";
+  }
+  // The run as one rendered value, and the same data read as one facet (the untilted normal): the
+  // facets' mixture is not the plain observation.
+  std::size_t end = 0;
+  EXPECT_LT((RenderRun(p, color, runs, 0, &end) - runs[2].rgb).norm(), kRoundingTolerance);
+  EXPECT_EQ(end, 3u);
+  std::vector<LocalObservation> one_normal = plain;
+  for (std::size_t i = 0; i < plain.size(); ++i) one_normal[i].rgb = runs[3 * i + 2].rgb;
+  std::vector<double> r_one(3 * one_normal.size());
+  EXPECT_GT(PixelResiduals(p, one_normal, settings, r_one.data()), 1e3 * kColorTolerance);
+  // Its Jacobian has the continued entries' rows at 0 and the run's at the last entry.
+  Eigen::VectorXd residuals;
+  Eigen::MatrixXd jacobian;
+  ASSERT_TRUE(EvaluatePixelJacobian(p, runs, settings, &residuals, &jacobian));
+  EXPECT_EQ(jacobian.row(0).norm(), 0.0);
+  EXPECT_GT(jacobian.row(6).norm(), 0.0);
+}
+
 TEST(BrdfCost, DefaultsAreTheU3mDefaults) {
   EXPECT_EQ(FitParameterDefault(FitParameter::kRoughness), 0.7);
   EXPECT_EQ(FitParameterDefault(FitParameter::kSpecular), 0.5);
