@@ -78,6 +78,10 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "With --ps-supersample: average each fine pixel onto the maps where its camera ray met the grid, not "
                "where its surface point lies in plan (for comparisons; docs/reconstruction.md, Placing the fine "
                "pixels on the plan)");
+  sub.add_flag("--one-normal-per-pixel", args->options.one_normal_per_pixel,
+               "With a tilted camera and --ps-supersample: fit the photographs with each map pixel's one normal, not "
+               "as the mixture of the pixel's finer normals as each camera sees them (for comparisons; docs/fitting.md, "
+               "Facets of the finer grid)");
   sub.add_flag("--follow-fibres", args->options.follow_fibres,
                "Turn the anisotropic stretch per pixel along the fibres the normals show (a lace's cord round its "
                "motif, a satin's floats), each cluster's rotation fitted on top; the rotation is then a texture "

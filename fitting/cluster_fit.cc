@@ -161,7 +161,7 @@ SolveOutcome SolveCluster(const ClusterSamples& samples, const ParameterMask& fr
   if (options.robust_loss.kind != RobustLossKind::kCauchy) return SolveClusterOnce(samples, free, options, params);
   const ParameterVector start = params;
   SolveOutcome outcome = SolveClusterOnce(samples, free, options, params);
-  const double observations = std::max<double>(1.0, static_cast<double>(samples.observations.size()));
+  const double observations = std::max<double>(1.0, static_cast<double>(CountMeasurements(samples.observations)));
   if (outcome.usable && outcome.final_cost <= kCauchyStallCostPerObservation * observations) return outcome;
   FitOptions convex = options;
   convex.robust_loss.kind = RobustLossKind::kHuber;
@@ -260,7 +260,7 @@ double SearchAnisotropyRotation(ClusterSamples& samples, const ParameterMask& fr
   const double cost = SamplesCost(turned, turned.pixels(), solved, options, residuals, free);
   ObservabilityContext context;
   context.pixel_count = static_cast<int>(samples.pixels());
-  context.residual_count = static_cast<int>(3 * samples.observations.size());
+  context.residual_count = 3 * CountMeasurements(samples.observations);
   context.cost = cost;
   const double gain = EffectiveChi2Increase(cost, cost_unturned, context, options.observability);
   if (!(gain > options.observability.default_rejection_chi2)) {
@@ -309,7 +309,7 @@ Matrix7 FisherInformation(const ClusterSamples& samples, const ParameterVector& 
     } else {
       *cost += 0.5 * r.squaredNorm();
     }
-    *residual_count += static_cast<int>(r.size());
+    *residual_count += 3 * CountMeasurements(samples.pixel(p));  // a facet run's continued slots are always 0
   }
   return fisher;
 }
@@ -415,9 +415,10 @@ ClusterFit FitCluster(int id, ClusterSamples& samples, const FitOptions& options
       const auto obs = samples.pixel(i);
       const Eigen::Vector3d c = SolveBaseColor(p, obs, CostSettingsFor(options, p, free, samples.luminance_start[i]));
       color_sum += c;
-      for (const LocalObservation& o : obs) {
-        err2 += (RenderLocal(p, c, o.light_local, o.view_local, o.irradiance) - o.rgb).squaredNorm();
-        data2 += o.rgb.squaredNorm();
+      for (std::size_t begin = 0, end = 0; begin < obs.size(); begin = end) {  // per measurement (facet runs)
+        const Eigen::Vector3d predicted = RenderRun(p, c, obs, begin, &end);
+        err2 += (predicted - obs[end - 1].rgb).squaredNorm();
+        data2 += obs[end - 1].rgb.squaredNorm();
       }
     }
     if (mean_color != nullptr) *mean_color = color_sum / static_cast<double>(samples.pixels());

@@ -1,5 +1,6 @@
 #include "fitting/principled_fit.h"
 #include "fitting/cluster_fit.h"
+#include "fitting/facet_mixture.h"
 #include "fitting/grid_start.h"
 #include "fitting/map_rules.h"
 #include "fitting/tiled_fit.h"
@@ -8,6 +9,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -80,6 +82,9 @@ struct FitContext {
   const SurfaceGeometry* geometry = nullptr;
   const FitOptions* options = nullptr;
   std::vector<ObservationInfo> observations;
+  // Largest number of entries a pixel's observations can take (facet runs: kMaxFacets for an
+  // observation of a tilted view when the geometry has fine normals), for buffer sizes.
+  std::size_t max_entries = 0;
 };
 
 double MedianLuminance(const Observation& o, std::size_t pixel_count) {
@@ -112,6 +117,15 @@ void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const F
   check_image(geometry.albedo, 3, "albedo", true);
   check_image(geometry.height_mm, 1, "height_mm", true);
   check_image(geometry.fibre_turn_deg, 1, "fibre_turn_deg", true);
+  if (!geometry.fine_normals.empty()) {
+    const int k = geometry.fine_factor;
+    if (k < 2 || k > kMaxFacetFactor) fail("fine_factor must be 2 .. " + std::to_string(kMaxFacetFactor));
+    if (geometry.fine_normals.width() != k * grid.width || geometry.fine_normals.height() != k * grid.height ||
+        geometry.fine_normals.channels() != 3) {
+      fail("fine_normals must be 3 channels on a grid fine_factor times the stack's (" + std::to_string(k * grid.width) +
+           " x " + std::to_string(k * grid.height) + ")");
+    }
+  }
   if (stack.observations.empty()) fail("stack has no observations");
   for (std::size_t i = 0; i < stack.observations.size(); ++i) {
     const Observation& o = stack.observations[i];
@@ -142,6 +156,12 @@ struct WorldObservation {
   double irradiance = 1.0;      // relative irradiance before the cosine
   Eigen::Vector3d rgb;          // measurement, linear RGB
   Eigen::Vector3d weight;       // 1 / sigma per channel
+  // A facet run's entry (LocalObservation): light_world and view_world turned by the facet's
+  // tilt, `pixel_light` / `pixel_view` as the pixel's own normal sees them (the usable test).
+  double facet_weight = 1.0;
+  bool continues = false;
+  Eigen::Vector3d pixel_light;
+  Eigen::Vector3d pixel_view;
 };
 
 // The pixel's own turn of the tangent (degrees, SurfaceGeometry::fibre_turn_deg), 0 without one.
@@ -173,22 +193,85 @@ bool WorldObservationAt(const FitContext& context, const ObservationInfo& info, 
   out->view_world = (info.view->centre_in_world_mm - point).normalized();
   out->irradiance = e;
   out->rgb = rgb;
+  out->facet_weight = 1.0;
+  out->continues = false;
+  out->pixel_light = out->light_world;
+  out->pixel_view = out->view_world;
   const double floor = options.noise_floor * info.level;
   const double min_sigma = kMinSigmaFraction * info.level;  // noise_floor may be 0
   for (int c = 0; c < 3; ++c) out->weight(c) = 1.0 / std::max(min_sigma, floor + options.noise_relative * std::abs(rgb(c)));
   return true;
 }
 
-// `world` in the shading frame `frame`; false when the light or the camera is below `min_cos`.
+// The facets each view sees in one pixel (facet_mixture.h), computed once per pixel and view.
+struct PixelFacetCache {
+  static constexpr int kCachedViews = 8;  // views beyond these are computed for each observation
+  std::array<int, kCachedViews> count;    // -1: not computed yet
+  std::array<FacetSet, kCachedViews> facets;
+  PixelFacetCache() { count.fill(-1); }
+};
+
+// Observation `info` of pixel `index` as world entries into `out`: one, or with fine normals, a
+// facet run (LocalObservation): each facet's entry has the light and view turned by
+// the rotation from the pixel's normal to the facet's, so that whatever normal the fit gives the
+// pixel, the facet keeps its tilt from it. Returns the entries written (0: not usable).
+int WorldEntriesAt(const FitContext& context, const ObservationInfo& info, std::size_t index, int col, int row,
+                   const Eigen::Vector3d& point, PixelFacetCache& cache, WorldObservation* out) {
+  WorldObservation plain;
+  if (!WorldObservationAt(context, info, index, col, row, point, &plain)) return 0;
+  const SurfaceGeometry& geometry = *context.geometry;
+  if (geometry.fine_normals.empty()) {
+    out[0] = plain;
+    return 1;
+  }
+  const int view = info.observation->view;
+  FacetSet computed;
+  const FacetSet* facets = &computed;
+  int count = 0;
+  if (view < PixelFacetCache::kCachedViews) {
+    if (cache.count[view] < 0) {
+      cache.count[view] = ViewFacets(geometry.fine_normals, geometry.fine_factor, col, row, plain.view_world,
+                                     &cache.facets[view]);
+    }
+    facets = &cache.facets[view];
+    count = cache.count[view];
+  } else {
+    count = ViewFacets(geometry.fine_normals, geometry.fine_factor, col, row, plain.view_world, &computed);
+  }
+  const Eigen::Vector3d n = GeometryNormal(context, index);
+  const double length = n.norm();
+  if (count == 0 || !(length > kMinNormalLength && length < kMaxNormalLength)) {
+    out[0] = plain;
+    return 1;
+  }
+  for (int f = 0; f < count; ++f) {
+    // Seeing the facet tilted from the pixel's normal is seeing every direction turned back by it.
+    const Eigen::Quaterniond back = Eigen::Quaterniond::FromTwoVectors(n / length, (*facets)[f].normal).conjugate();
+    WorldObservation& entry = out[f];
+    entry = plain;
+    entry.light_world = back * plain.light_world;
+    entry.view_world = back * plain.view_world;
+    entry.facet_weight = (*facets)[f].weight;
+    entry.continues = f + 1 < count;
+    if (entry.continues) {
+      entry.rgb.setZero();
+      entry.weight.setZero();
+    }
+  }
+  return count;
+}
+
+// `world` in the shading frame `frame`; false when the light or the camera is below `min_cos` (as
+// the pixel's own normal sees them: a facet run is used or left out as a whole).
 bool ToLocalObservation(const WorldObservation& world, const ShadingFrame& frame, double min_cos, LocalObservation* out) {
-  const Eigen::Vector3d l = frame.ToLocal(world.light_world);
-  const Eigen::Vector3d v = frame.ToLocal(world.view_world);
-  if (l.z() < min_cos || v.z() < min_cos) return false;
-  out->light_local = l;
-  out->view_local = v;
+  if (frame.ToLocal(world.pixel_light).z() < min_cos || frame.ToLocal(world.pixel_view).z() < min_cos) return false;
+  out->light_local = frame.ToLocal(world.light_world);
+  out->view_local = frame.ToLocal(world.view_world);
   out->irradiance = world.irradiance;
   out->rgb = world.rgb;
   out->weight = world.weight;
+  out->facet_weight = world.facet_weight;
+  out->continues = world.continues;
   return true;
 }
 
@@ -199,10 +282,11 @@ int GatherWorldObservations(const FitContext& context, std::size_t index, std::v
   const int col = static_cast<int>(index % width);
   const int row = static_cast<int>(index / width);
   const Eigen::Vector3d point = SurfacePoint(context, col, row);
-  if (out.size() < context.observations.size()) out.resize(context.observations.size());
+  if (out.size() < context.max_entries) out.resize(context.max_entries);
+  PixelFacetCache facets;
   int count = 0;
   for (const ObservationInfo& info : context.observations) {
-    if (WorldObservationAt(context, info, index, col, row, point, &out[count])) ++count;
+    count += WorldEntriesAt(context, info, index, col, row, point, facets, &out[count]);
   }
   return count;
 }
@@ -222,13 +306,21 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
   const Eigen::Vector3d point = SurfacePoint(context, col, row);
   const double min_cos = context.options->min_cos;
   int count = 0;
-  WorldObservation world;
+  std::array<WorldObservation, kMaxFacets> entries;
+  PixelFacetCache facets;
   for (const ObservationInfo& info : context.observations) {
-    if (!WorldObservationAt(context, info, index, col, row, point, &world)) continue;
-    LocalObservation& lo = out[count];
-    if (!ToLocalObservation(world, frame, min_cos, &lo)) continue;
-    if (ratios != nullptr) ratios[count] = static_cast<float>(Luminance(lo.rgb) / (lo.light_local.z() * lo.irradiance));
-    ++count;
+    const int entry_count = WorldEntriesAt(context, info, index, col, row, point, facets, entries.data());
+    double run_cosine = 0.0;  // the run's cos_l: its facets' cosines with their shares
+    for (int e = 0; e < entry_count; ++e) {
+      LocalObservation& lo = out[count];
+      if (!ToLocalObservation(entries[e], frame, min_cos, &lo)) break;  // a run is usable as a whole
+      run_cosine += lo.facet_weight * std::max(0.0, lo.light_local.z());
+      // The ratio at the run's last entry (0 in its continued entries: they hold no data).
+      if (ratios != nullptr) {
+        ratios[count] = lo.continues ? 0.0f : static_cast<float>(Luminance(lo.rgb) / (run_cosine * lo.irradiance));
+      }
+      ++count;
+    }
   }
   return count;
 }
@@ -241,11 +333,18 @@ int GatherPixel(const FitContext& context, std::size_t index, LocalObservation* 
   return GatherPixelWithNormal(context, index, GeometryNormal(context, index), 0.0, out, ratios);
 }
 
+// True when the `count` entries at `obs` hold at least min_observations measurements (a facet run
+// counts once).
+bool EnoughMeasurements(const FitContext& context, const LocalObservation* obs, int count) {
+  return CountMeasurements(std::span<const LocalObservation>(obs, static_cast<std::size_t>(count))) >=
+         context.options->min_observations;
+}
+
 // RefineNormal's buffers, one per worker: grown to the stack's observation count once, then reused
 // (no allocation per pixel).
 struct NormalRefinementScratch {
   std::vector<WorldObservation> world;
-  std::vector<double> residuals;  // 4 x 3 n_obs: the residuals, a trial's, two Jacobian columns
+  std::vector<double> residuals;  // 4 x 3 entries: the residuals, a trial's, two Jacobian columns
 };
 
 // Refines the normal of one pixel with the full Principled model at the cluster's shared `params`
@@ -257,7 +356,7 @@ struct NormalRefinementScratch {
 // The pixel's observations are read from the stack once (GatherWorldObservations) and turned into
 // each trial normal's frame; the Jacobian is a forward difference (2 evaluations a step, not 4:
 // Gauss-Newton needs its direction, not its last digit, and the accepted step is checked on the
-// cost). `buffer` (n_obs entries) ends holding the pixel's usable observations in the returned
+// cost). `buffer` (FitContext::max_entries) ends holding the pixel's usable observations in the returned
 // normal's frame, as GatherPixelWithNormal gives them, and `*count` their number.
 Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const ParameterVector& params,
                              double rotation_deg, const PixelCostSettings& settings, int iterations,
@@ -291,7 +390,7 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
     return n;
   };
   const int count0 = localize(n0);
-  if (count0 < options.min_observations) return finish(n0);
+  if (!EnoughMeasurements(context, buffer, count0)) return finish(n0);
   const std::size_t m = 3 * static_cast<std::size_t>(count0);
   scratch.residuals.resize(4 * m);
   double* r = scratch.residuals.data();
@@ -358,9 +457,12 @@ void PixelAlbedo(const FitContext& context, std::size_t index, const LocalObserv
     return;
   }
   for (int c = 0; c < 3; ++c) {
-    for (int i = 0; i < count; ++i) scratch[i] = static_cast<float>(obs[i].rgb(c) / (obs[i].light_local.z() * obs[i].irradiance));
-    std::nth_element(scratch, scratch + count / 2, scratch + count);
-    albedo[c] = count > 0 ? scratch[count / 2] : 0.0f;
+    int measured = 0;  // a facet run's continued entries hold no data
+    for (int i = 0; i < count; ++i) {
+      if (!obs[i].continues) scratch[measured++] = static_cast<float>(obs[i].rgb(c) / (obs[i].light_local.z() * obs[i].irradiance));
+    }
+    std::nth_element(scratch, scratch + measured / 2, scratch + measured);
+    albedo[c] = measured > 0 ? scratch[measured / 2] : 0.0f;
   }
 }
 
@@ -372,13 +474,20 @@ struct PixelBuffers {
   explicit PixelBuffers(std::size_t n) : observations(n), ratios(n), scratch(n) {}
 };
 
-// Gathers a pixel and computes its appearance features; returns the observation count.
-int PixelFeatures(const FitContext& context, std::size_t index, PixelBuffers& buffers, float* features) {
+// Gathers a pixel and computes its appearance features (when it has enough measurements, which
+// `*enough` says); returns the number of entries gathered.
+int PixelFeatures(const FitContext& context, std::size_t index, PixelBuffers& buffers, float* features, bool* enough) {
   const int count = GatherPixel(context, index, buffers.observations.data(), buffers.ratios.data());
-  if (count < context.options->min_observations) return count;
+  *enough = EnoughMeasurements(context, buffers.observations.data(), count);
+  if (!*enough) return count;
   float albedo[3];
   PixelAlbedo(context, index, buffers.observations.data(), count, buffers.scratch.data(), albedo);
-  AppearanceFeatures(albedo, std::span<float>(buffers.ratios.data(), count), features);
+  // One ratio per measurement: a facet run's continued entries hold no data.
+  int measured = 0;
+  for (int i = 0; i < count; ++i) {
+    if (!buffers.observations[i].continues) buffers.scratch[measured++] = buffers.ratios[i];
+  }
+  AppearanceFeatures(albedo, std::span<float>(buffers.scratch.data(), measured), features);
   return count;
 }
 
@@ -515,7 +624,7 @@ ParameterVector ClusterPixelPriorStd(const ClusterSamples& samples, const Parame
   std::array<std::size_t, kFitParameterCount> counted{};
   for (std::size_t p = 0; p < samples.pixels(); ++p) {
     const std::span<const LocalObservation> obs = samples.pixel(p);
-    if (obs.size() < 2 * kMaxPixelParameters) continue;
+    if (CountMeasurements(obs) < 2 * kMaxPixelParameters) continue;
     ParameterVector x = params;
     ParameterVector sd;
     sd.fill(-1.0);
@@ -599,6 +708,8 @@ FitContext MakeContext(const Stack& stack, const SurfaceGeometry& geometry, cons
   for (ObservationInfo& info : context.observations) {
     if (!(info.level > 0.0)) info.level = typical_level;
   }
+  // Every observation may be a facet run where the geometry has fine normals.
+  context.max_entries = stack.observations.size() * (geometry.fine_normals.empty() ? 1 : kMaxFacets);
   return context;
 }
 
@@ -621,7 +732,6 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   const std::size_t pixel_count = static_cast<std::size_t>(grid.width) * grid.height;
   const FitContext context = MakeContext(stack, geometry, options, {});
   for (const ObservationInfo& info : context.observations) model.observation_levels.push_back(info.level);
-  const std::size_t n_obs = stack.observations.size();
 
   // 1. Gather: features of an evenly strided candidate set of pixels.
   double t = SteadySeconds();
@@ -632,10 +742,11 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   std::vector<float> features(candidate_count * kAppearanceFeatureCount);
   std::vector<std::uint8_t> valid(candidate_count, 0);
   ParallelFor(candidate_count, [&](std::size_t begin, std::size_t end) {
-    PixelBuffers buffers(n_obs);
+    PixelBuffers buffers(context.max_entries);
     for (std::size_t i = begin; i < end; ++i) {
-      const int count = PixelFeatures(context, candidates[i], buffers, &features[i * kAppearanceFeatureCount]);
-      valid[i] = count >= options.min_observations ? 1 : 0;
+      bool enough = false;
+      PixelFeatures(context, candidates[i], buffers, &features[i * kAppearanceFeatureCount], &enough);
+      valid[i] = enough ? 1 : 0;
     }
   });
   model.times.gather_s = SteadySeconds() - t;
@@ -662,7 +773,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
   std::atomic<int> done{0};
   std::mutex progress_mutex;
   ParallelFor(static_cast<std::size_t>(k), [&](std::size_t begin, std::size_t end) {
-    std::vector<LocalObservation> buffer(n_obs);
+    std::vector<LocalObservation> buffer(context.max_entries);
     for (std::size_t c = begin; c < end; ++c) {
       const std::vector<std::size_t>& m = members[c];
       const std::size_t take = std::min<std::size_t>(m.size(), options.samples_per_cluster);
@@ -670,7 +781,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
       s.offsets.push_back(0);
       for (std::size_t j = 0; j < take; ++j) {
         const int count = GatherPixel(context, m[j * m.size() / take], buffer.data(), nullptr);
-        if (count < options.min_observations) continue;
+        if (!EnoughMeasurements(context, buffer.data(), count)) continue;
         s.observations.insert(s.observations.end(), buffer.begin(), buffer.begin() + count);
         s.offsets.push_back(s.observations.size());
         s.luminance_start.push_back(0.2);
@@ -714,7 +825,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
         int changed = 0;
         for (std::size_t j = 0; j < take; ++j) {
           const std::size_t index = m[j * m.size() / take];
-          if (GatherPixel(context, index, buffer.data(), nullptr) < options.min_observations) continue;
+          if (!EnoughMeasurements(context, buffer.data(), GatherPixel(context, index, buffer.data(), nullptr))) continue;
           const PixelCostSettings settings =
               CostSettingsFor(options, params, free, Luminance(model.clusters[c].mean_base_color));
           int count = 0;
@@ -723,7 +834,7 @@ ClusterModel FitClusterModel(const Stack& stack, const SurfaceGeometry& geometry
           change_sum += std::atan2(n.cross(previous[j]).norm(), n.dot(previous[j])) * 180.0 / M_PI;
           ++changed;
           previous[j] = n;
-          if (count < options.min_observations) continue;
+          if (!EnoughMeasurements(context, buffer.data(), count)) continue;
           refined.observations.insert(refined.observations.end(), buffer.begin(), buffer.begin() + count);
           refined.offsets.push_back(refined.observations.size());
           refined.luminance_start.push_back(0.2);
@@ -912,7 +1023,6 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   }
   const double t = SteadySeconds();
   const FitContext context = MakeContext(band, geometry, options, model.observation_levels);
-  const std::size_t n_obs = band.observations.size();
   const Clustering& clustering = model.clustering;
   // Pixels with their own turns make the rotation a map even where every cluster is unturned.
   if (!geometry.fibre_turn_deg.empty() && result.anisotropy_rotation_deg.empty()) {
@@ -943,11 +1053,11 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
   ParameterVector variance_delta{};  // under count_mutex: sum of (pixel variance - cluster variance)
   const double gloss_threshold = -std::log(1.0 - options.pixel_min_specular_fraction);
   ParallelFor(static_cast<std::size_t>(grid.height), [&](std::size_t row_begin, std::size_t row_end) {
-    PixelBuffers buffers(n_obs);
+    PixelBuffers buffers(context.max_entries);
     std::vector<double> r0, r1, jac;
-    r0.reserve(3 * n_obs);
-    r1.reserve(3 * n_obs);
-    jac.reserve(3 * n_obs * kMaxPixelParameters);
+    r0.reserve(3 * context.max_entries);
+    r1.reserve(3 * context.max_entries);
+    jac.reserve(3 * context.max_entries * kMaxPixelParameters);
     std::vector<std::int64_t> local_pixels(k, 0);
     std::int64_t local_fitted = 0, local_refined = 0;
     ParameterVector local_variance_delta{};
@@ -957,12 +1067,13 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
     for (std::size_t row = row_begin; row < row_end; ++row) {
       for (int col = 0; col < grid.width; ++col) {
         const std::size_t index = row * grid.width + col;
-        int count = PixelFeatures(context, index, buffers, feature);
+        bool enough = false;
+        int count = PixelFeatures(context, index, buffers, feature, &enough);
         if (refine_normals) {  // the reconstruction's normal unless refined below
           const Eigen::Vector3d n = GeometryNormal(context, index);
           for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
         }
-        if (count < options.min_observations) {
+        if (!enough) {
           if (!geometry.albedo.empty()) {
             for (int ch = 0; ch < 3; ++ch) {
               result.base_color.at(ch, row0 + row, col) = std::clamp(geometry.albedo.at(ch, row, col), 0.0f, 1.0f);
@@ -1214,6 +1325,13 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
       observation.view >= static_cast<int>(stack.views.size())) {
     throw std::invalid_argument("RenderFitted: observation light or view out of range");
   }
+  const bool facets_given = !geometry.fine_normals.empty();
+  if (facets_given && (geometry.fine_factor < 2 || geometry.fine_factor > kMaxFacetFactor ||
+                       geometry.fine_normals.width() != geometry.fine_factor * grid.width ||
+                       geometry.fine_normals.height() != geometry.fine_factor * grid.height ||
+                       geometry.fine_normals.channels() != 3)) {
+    throw std::invalid_argument("RenderFitted: fine_normals must be 3 channels, fine_factor times the stack's grid");
+  }
   Image out(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   const LightModel& light = stack.lights[observation.light];
   const ViewGeometry& view = stack.views[observation.view];
@@ -1239,7 +1357,15 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
         }
         const Eigen::Vector3d c(result.base_color.at(0, row, col), result.base_color.at(1, row, col),
                                 result.base_color.at(2, row, col));
-        const Eigen::Vector3d rgb = RenderLocal(params, c, frame.ToLocal(lw), frame.ToLocal(vw), e);
+        Eigen::Vector3d rgb = Eigen::Vector3d::Zero();
+        FacetSet facets;
+        const int facet_count =
+            facets_given ? ViewFacets(geometry.fine_normals, geometry.fine_factor, col, static_cast<int>(row), vw, &facets) : 0;
+        for (int f = 0; f < facet_count; ++f) {  // as the fit modelled this view (WorldEntriesAt)
+          const Eigen::Quaterniond back = Eigen::Quaterniond::FromTwoVectors(n, facets[f].normal).conjugate();
+          rgb += facets[f].weight * RenderLocal(params, c, frame.ToLocal(back * lw), frame.ToLocal(back * vw), e);
+        }
+        if (facet_count == 0) rgb = RenderLocal(params, c, frame.ToLocal(lw), frame.ToLocal(vw), e);
         for (int ch = 0; ch < 3; ++ch) out.at(ch, row, col) = static_cast<float>(rgb(ch));
       }
     }

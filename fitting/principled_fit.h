@@ -271,11 +271,18 @@ struct FitResult {
 // normal (shading_frame.h), the fibres' direction where the relief shows one
 // (pipeline/fibre_direction.h). A cluster's anisotropy rotation is then fitted on top of it, and
 // the rotation map holds their sum per pixel.
+// fine_normals (3 channels, unit, world frame; empty: none) on a grid `fine_factor` (2 ..
+// kMaxFacetFactor) times finer than the stack's, cell (col, row) covering fine pixels
+// [fine_factor col, fine_factor (col + 1)) x [fine_factor row, ...): every observation is then
+// modelled as the mixture of those facets as its camera sees them (fitting/facet_mixture.h), each
+// facet keeping its tilt from the pixel's normal when the fit refines that.
 struct SurfaceGeometry {
   Image normals;
   Image albedo;
   Image height_mm;
   Image fibre_turn_deg;
+  Image fine_normals;
+  int fine_factor = 1;
 };
 
 // Fits the maps. Throws std::invalid_argument when the inputs do not match (sizes, indices,

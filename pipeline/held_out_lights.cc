@@ -86,7 +86,7 @@ HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stac
     reconstruction::MarkCastShadows(geometry.height_mm, &check, options.cast_shadows);
   }
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm, Image()};
+                                         geometry.height_mm, Image(), geometry.fine_normals, geometry.fine_factor};
   HeldOutSums sums;
   sums.Add(fit, check, surface);
   return sums.Finish(SteadySeconds() - start);

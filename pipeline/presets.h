@@ -56,6 +56,11 @@ struct StageOptions {
   // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
   // Off only for comparisons (`process --no-plan-placement`).
   bool place_fine_pixels_on_plan = true;
+  // With a tilted view and photometric stereo on a finer grid: the fit models every observation as
+  // the mixture of each map pixel's fine normals as its camera sees them (fitting/facet_mixture.h,
+  // SideReconstruction::fine_normals), not with the pixel's one normal. Off only for comparisons
+  // (`process --one-normal-per-pixel`).
+  bool fit_facets = true;
   // The fit's shading frame turned per pixel along the fibres that the normals' relief shows
   // (pipeline/fibre_direction.h, fitting::SurfaceGeometry::fibre_turn_deg), each cluster's
   // anisotropy rotation fitted on top (`process --follow-fibres`; in bands too, pipeline/tiled_side.cc).

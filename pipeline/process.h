@@ -40,6 +40,9 @@ struct ProcessOptions {
   // grid instead of where their surface points lie in plan (StageOptions::place_fine_pixels_on_plan;
   // for comparisons).
   bool no_plan_placement = false;
+  // With a tilted view and --ps-supersample: fit the photographs with each map pixel's one normal,
+  // not as the mixture of its fine normals (StageOptions::fit_facets; for comparisons).
+  bool one_normal_per_pixel = false;
   // Turn the fit's shading frame per pixel along the fibres the normals show
   // (StageOptions::follow_fibres).
   bool follow_fibres = false;

@@ -281,17 +281,24 @@ Image FibreTurnsIfFollowed(const Image& normals, const StageOptions& options) {
 
 fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
                                      const StageOptions& options) {
-  return {normals, albedo, height_mm, FibreTurnsIfFollowed(normals, options)};
+  return {normals, albedo, height_mm, FibreTurnsIfFollowed(normals, options), Image(), 1};
 }
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
-  const fitting::SurfaceGeometry surface = FitGeometry(geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                                      geometry.height_mm, options);
+  fitting::SurfaceGeometry surface = FitGeometry(geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
+                                                geometry.height_mm, options);
+  surface.fine_normals = geometry.fine_normals;  // the facets of a side with a tilted view (SideReconstruction)
+  surface.fine_factor = geometry.fine_factor;
   fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
-  ReportFitStep(fit, std::to_string(fit.clusters.size()) + " clusters", SteadySeconds() - start, report);
+  std::string detail = std::to_string(fit.clusters.size()) + " clusters";
+  if (!surface.fine_normals.empty()) {
+    detail += ", every photograph fitted as the mixture of the " + std::to_string(surface.fine_factor) +
+              "x finer grid's facets";
+  }
+  ReportFitStep(fit, detail, SteadySeconds() - start, report);
   return fit;
 }
 
@@ -319,7 +326,7 @@ Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const Si
   Image residual(w, h, 1, 0.0f, stack.grid.pitch_mm);
   std::vector<float> count(static_cast<std::size_t>(w) * h, 0.0f);
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm, Image()};
+                                         geometry.height_mm, Image(), geometry.fine_normals, geometry.fine_factor};
   const int n = static_cast<int>(stack.observations.size());
   const int used = std::min(n, std::max(1, max_observations));
   for (int k = 0; k < used; ++k) {

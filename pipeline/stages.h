@@ -53,6 +53,11 @@ struct SideReconstruction {
   // Share of the pixels photometric stereo solved again after the marks (-1: not a single second
   // solve, e.g. near-light rounds or marking off).
   double cast_shadow_solved_again_share = -1.0;
+  // A side with a tilted view solved on a grid fine_factor times finer (supersampled_reconstruction.h):
+  // that grid's unit normals (world frame), which the fit takes as the facets each camera sees in a
+  // map pixel (fitting/facet_mixture.h). Empty otherwise.
+  Image fine_normals;
+  int fine_factor = 1;
 };
 
 // Marks the stack's cast shadows (kCastShadow) when options.mark_cast_shadows, so that FitSide and

@@ -159,6 +159,13 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
   }
   report->steps.push_back(
       CastShadowStep(options, out.cast_shadow_share, near, SteadySeconds() - start, out.cast_shadow_solved_again_share));
+  if (options.photometric_stereo.view >= 0 && NeedsReliefRegistration(*stack) && options.fit_facets) {
+    // The fine solves read the most vertical view alone and the fit stays on the maps' grid: it
+    // takes their normals as the facets each camera sees in a map pixel (fitting/facet_mixture.h;
+    // docs/fitting.md, "Facets of the finer grid").
+    out.fine_normals = f.normal;
+    out.fine_factor = k;
+  }
   if (keep_fine && every_observation) {
     keep_fine->k = k;
     keep_fine->stack = std::move(fine);
@@ -202,7 +209,8 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
                                          geometry.height_mm,
                                          fine_surface.fibre_turn_deg.empty()
                                              ? Image()
-                                             : AverageTurnsOntoMaps(fine_surface.fibre_turn_deg, k, stack.grid.pitch_mm)};
+                                             : AverageTurnsOntoMaps(fine_surface.fibre_turn_deg, k, stack.grid.pitch_mm),
+                                         Image(), 1};
   // FitPrincipled's stages (tiled_fit.h): the clusters on the fine grid (its stack holds the maps'
   // observations in the same order, so the model serves both grids), then the per-pixel step on the
   // maps' grid for the written maps and once more on the fine grid for the normals.

@@ -165,7 +165,7 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
 // the rows of the fibres' turns when there are any (`turns`, on the whole grid).
 fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows, const Image& turns = Image()) {
   return {CropRows(geometry.photometric_stereo.normal, row0, rows), CropRows(geometry.photometric_stereo.albedo, row0, rows),
-          CropRows(geometry.height_mm, row0, rows), turns.empty() ? Image() : CropRows(turns, row0, rows)};
+          CropRows(geometry.height_mm, row0, rows), turns.empty() ? Image() : CropRows(turns, row0, rows), Image(), 1};
 }
 
 }  // namespace
@@ -665,14 +665,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     fitting::SurfaceGeometry surface;
     if (!fine_fit_normal.empty()) {
-      surface = {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image()};
+      surface = {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image(), Image(), 1};
     } else {
       PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
           *band, ps_options,
           fine_solve_height.empty()
               ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
               : CropRows(fine_solve_height, row0, rows));
-      surface = {std::move(solved.normal), std::move(solved.albedo), Image(), Image()};
+      surface = {std::move(solved.normal), std::move(solved.albedo), Image(), Image(), Image(), 1};
     }
     // The fibres' turns of a band, from its own normals (within the window's reach of a band edge,
     // a few fine rows, they differ slightly from one band's).

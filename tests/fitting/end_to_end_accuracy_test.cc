@@ -181,7 +181,7 @@ TEST_P(EndToEndAccuracy, LeftOutLightsReRenderWithinIssue6Target) {
   const bool near = std::string(GetParam()) == "near";
   ASSERT_TRUE(AdoptFittedNormals(&fit, fitted.grid, near, options_, &geometry, &report_));
   const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm, Image()};
+                                         geometry.height_mm, Image(), Image(), 1};
   double num = 0.0, den = 0.0;
   for (const Observation& o : held_out) {
     const Image render = fitting::RenderFitted(fit, fitted, surface, o);

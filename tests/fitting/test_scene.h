@@ -55,6 +55,12 @@ struct SceneSpec {
   // turned about the normal) per pixel; empty: 0 everywhere, the fit's own convention. A twill's
   // warp runs at 90 degrees to its weft.
   std::function<double(int col, int row)> tangent_deg;
+  // > 1: every pixel is this many facets along each side, each with the bump field's normal at its
+  // own centre, and a camera photographs their mixture, each facet weighted by the area it sees of
+  // it, max(0, n.v) / n_z (fitting/facet_mixture.h). The geometry's normals are then the facets'
+  // normalised mean (the area-average normal photometric stereo gives) and its fine_normals the
+  // facets' (fine_factor = this).
+  int facets_per_pixel = 0;
 };
 
 // Overhead rig: 16 lights on four rings (elevation 15, 35, 55, 75 degrees).
@@ -130,6 +136,19 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
   o.light = light;
   o.rgb = Image(spec.width, spec.height, 3, 0.0f, spec.pitch_mm);
   o.flags.assign(static_cast<std::size_t>(spec.width) * spec.height, 0);
+  // f cos_l E of one facet of unit normal n.
+  auto shade = [&](int col, int row, const Eigen::Vector3d& n, const Eigen::Vector3d& lw, const Eigen::Vector3d& vw,
+                   double irradiance) {
+    const Eigen::Vector3d t0 = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
+    const double turn = spec.tangent_deg ? spec.tangent_deg(col, row) * kDegToRad : 0.0;
+    const Eigen::Vector3d t = std::cos(turn) * t0 + std::sin(turn) * n.cross(t0);
+    const Eigen::Vector3d b = n.cross(t);
+    const Vec3<double> l(lw.dot(t), lw.dot(b), lw.dot(n));
+    const Vec3<double> v(vw.dot(t), vw.dot(b), vw.dot(n));
+    const auto& params = scene.truth[static_cast<std::size_t>(row) * spec.width + col];
+    return Vec3<double>(EvaluateModel(spec.model, params, l, v) * (std::max(0.0, l.z()) * irradiance));
+  };
+  const int k = spec.facets_per_pixel;
   for (int row = 0; row < spec.height; ++row) {
     for (int col = 0; col < spec.width; ++col) {
       const Eigen::Vector3d p = stack.grid.PixelCentreInWorld(col, row);
@@ -137,17 +156,26 @@ inline Observation RenderObservation(const Scene& scene, const SceneSpec& spec, 
       const Eigen::Vector3d point(p.x(), p.y(), h);
       const Eigen::Vector3d n(scene.geometry.normals.at(0, row, col), scene.geometry.normals.at(1, row, col),
                               scene.geometry.normals.at(2, row, col));
-      const Eigen::Vector3d t0 = (Eigen::Vector3d::UnitX() - n.x() * n).normalized();
-      const double turn = spec.tangent_deg ? spec.tangent_deg(col, row) * kDegToRad : 0.0;
-      const Eigen::Vector3d t = std::cos(turn) * t0 + std::sin(turn) * n.cross(t0);
-      const Eigen::Vector3d b = n.cross(t);
       const Eigen::Vector3d lw = stack.lights[light].DirectionFrom(point);
       const double irradiance = stack.lights[light].RelativeIrradianceAt(point);
       const Eigen::Vector3d vw = (stack.views[view].centre_in_world_mm - point).normalized();
-      const Vec3<double> l(lw.dot(t), lw.dot(b), lw.dot(n));
-      const Vec3<double> v(vw.dot(t), vw.dot(b), vw.dot(n));
-      const auto& params = scene.truth[static_cast<std::size_t>(row) * spec.width + col];
-      const Vec3<double> rgb = EvaluateModel(spec.model, params, l, v) * (std::max(0.0, l.z()) * irradiance);
+      Vec3<double> rgb = Vec3<double>::Zero();
+      if (k > 1) {
+        double seen = 0.0;
+        for (int j = 0; j < k; ++j) {
+          for (int i = 0; i < k; ++i) {
+            const Image& fine = scene.geometry.fine_normals;
+            const Eigen::Vector3d nf(fine.at(0, row * k + j, col * k + i), fine.at(1, row * k + j, col * k + i),
+                                     fine.at(2, row * k + j, col * k + i));
+            const double w = std::max(0.0, nf.dot(vw)) / nf.z();
+            rgb += w * shade(col, row, nf.normalized(), lw, vw, irradiance);
+            seen += w;
+          }
+        }
+        rgb /= seen;
+      } else {
+        rgb = shade(col, row, n, lw, vw, irradiance);
+      }
       bool saturated = false;
       for (int c = 0; c < 3; ++c) {
         double value = rgb(c);
@@ -196,10 +224,27 @@ inline Scene MakeScene(const SceneSpec& spec) {
   scene.geometry.normals = Image(spec.width, spec.height, 3, 0.0f, spec.pitch_mm);
   scene.geometry.height_mm = Image(spec.width, spec.height, 1, 0.0f, spec.pitch_mm);
   scene.geometry.albedo = Image(spec.width, spec.height, 3, 0.0f, spec.pitch_mm);
+  const int k = spec.facets_per_pixel;
+  if (k > 1) {
+    scene.geometry.fine_normals = Image(k * spec.width, k * spec.height, 3, 0.0f, spec.pitch_mm / k);
+    scene.geometry.fine_factor = k;
+  }
   for (int row = 0; row < spec.height; ++row) {
     for (int col = 0; col < spec.width; ++col) {
       const Eigen::Vector3d p = stack.grid.PixelCentreInWorld(col, row);
-      const Eigen::Vector3d n = NormalAt(spec, p.x(), p.y());
+      Eigen::Vector3d n = NormalAt(spec, p.x(), p.y());
+      if (k > 1) {  // facet (i, j) centred at its place in the pixel (rows run toward -y)
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int j = 0; j < k; ++j) {
+          for (int i = 0; i < k; ++i) {
+            const Eigen::Vector3d nf = NormalAt(spec, p.x() + ((i + 0.5) / k - 0.5) * spec.pitch_mm,
+                                                p.y() - ((j + 0.5) / k - 0.5) * spec.pitch_mm);
+            for (int c = 0; c < 3; ++c) scene.geometry.fine_normals.at(c, row * k + j, col * k + i) = static_cast<float>(nf(c));
+            sum += nf;
+          }
+        }
+        n = sum.normalized();
+      }
       for (int c = 0; c < 3; ++c) scene.geometry.normals.at(c, row, col) = static_cast<float>(n(c));
       scene.geometry.height_mm.at(0, row, col) = static_cast<float>(HeightMm(spec, p.x(), p.y()));
       const PrincipledParams<double> params = spec.material(col, row);

@@ -345,6 +345,49 @@ TEST(SupersampledReconstruction, ClustersOnTheFinerGridReadTheLobeCloser) {
   EXPECT_LT(on_fine.evaluation.normal_mean_deg, on_maps.evaluation.normal_mean_deg + kNormalSlackDeg);
 }
 
+TEST(SupersampledReconstruction, WithATiltedViewThePhotographsAreFittedAsTheFinerGridsFacets) {
+  // The velvet on the oblique rig (top camera and one at 60 deg) at twice the maps' dpi: the fit
+  // stays on the maps' grid (relief registration) and takes the 2x grid's normals as each map
+  // pixel's facets (fitting/facet_mixture.h); `--one-normal-per-pixel` fits one normal per pixel.
+  test::TempDir dir;
+  synthetic::SynthOptions synth;
+  synth.scene = "velvet";
+  synth.rig = "oblique";
+  synth.width = synth.height = kCameraPixels;
+  synth.dpi = kCameraDpi;
+  synth.capture.format = synthetic::FrameFormat::kTiff;
+  synth.capture.calibration_frames = false;
+  synthetic::RunSynth(synth, dir / "synth");
+  ProcessOptions options;
+  options.preset = Preset::kFast;
+  options.dpi = kMapDpi;
+  options.debug_maps = true;
+  auto run = [&](bool one_normal, const std::string& name) {
+    options.one_normal_per_pixel = one_normal;
+    ProcessedRun out;
+    out.result = ProcessCapture({dir / "synth" / synthetic::kCaptureSubdir, dir / name, name}, options);
+    out.evaluation = bench::Evaluate(dir / name, dir / "synth" / synthetic::kTruthSubdir);
+    const bench::ParameterError& sheen = bench::FindParameter(out.evaluation, "sheen");
+    std::cout << "[ MEASURED ] " << name << ": sheen " << sheen.estimate_mean << " for " << sheen.truth_mean
+              << " (error " << sheen.mean_abs_error << "), roughness error "
+              << bench::FindParameter(out.evaluation, "roughness").mean_abs_error << ", re-render "
+              << 100.0 * out.evaluation.rerender_relative_rmse << " %\n";
+    return out;
+  };
+  const ProcessedRun facets = run(false, "facets");
+  const ProcessedRun one_normal = run(true, "one_normal");
+  EXPECT_EQ(facets.result.report.options["fit_facets"], true);
+  EXPECT_EQ(one_normal.result.report.options["fit_facets"], false);
+  const StepRecord* fit_step = FindStep(facets.result.report, "fit");
+  ASSERT_NE(fit_step, nullptr);
+  EXPECT_NE(fit_step->reason.find("mixture of the 2x finer grid's facets"), std::string::npos) << fit_step->reason;
+  const StepRecord* one_normal_fit = FindStep(one_normal.result.report, "fit");
+  ASSERT_NE(one_normal_fit, nullptr);
+  EXPECT_EQ(one_normal_fit->reason.find("facets"), std::string::npos) << one_normal_fit->reason;
+  EXPECT_TRUE(bench::FindParameter(facets.evaluation, "sheen").measured);
+  EXPECT_TRUE(std::isfinite(facets.evaluation.rerender_relative_rmse));
+}
+
 TEST(SupersampledReconstruction, TheBaseColourFromTheFinerGridIsCloserToTheTruth) {
   // The maps' observations are dimmed in the crevices by yarn shadows their heights cannot mark
   // (pipeline/fine_colour.h); the fine pixels' own colours are not. Measured on this capture (the
