@@ -600,9 +600,9 @@ double HighlightShare(const ClusterSamples& samples, const ParameterVector& para
     const auto obs = samples.pixel(p);
     const Eigen::Vector3d color = SolveBaseColor(params, obs, CostSettingsFor(options, params, free, samples.luminance_start[p]));
     if (!color.allFinite()) continue;
-    for (const LocalObservation& o : obs) {
-      const double full = Luminance(RenderLocal(params, color, o.light_local, o.view_local, o.irradiance));
-      const double lobe = full - Luminance(RenderLocal(matte, color, o.light_local, o.view_local, o.irradiance));
+    for (std::size_t begin = 0, end = 0; begin < obs.size(); begin = end) {  // per measurement (facet runs)
+      const double full = Luminance(RenderRun(params, color, obs, begin, &end));
+      const double lobe = full - Luminance(RenderRun(matte, color, obs, begin, &end));
       if (full > 0.0 && lobe >= options.highlight_lobe_fraction * full) {
         ++with_highlight;
         break;

@@ -457,9 +457,13 @@ void PixelAlbedo(const FitContext& context, std::size_t index, const LocalObserv
     return;
   }
   for (int c = 0; c < 3; ++c) {
-    int measured = 0;  // a facet run's continued entries hold no data
+    int measured = 0;  // one ratio per measurement, with a facet run's cosine (GatherPixelWithNormal)
+    double run_cosine = 0.0;
     for (int i = 0; i < count; ++i) {
-      if (!obs[i].continues) scratch[measured++] = static_cast<float>(obs[i].rgb(c) / (obs[i].light_local.z() * obs[i].irradiance));
+      run_cosine += obs[i].facet_weight * std::max(0.0, obs[i].light_local.z());
+      if (obs[i].continues) continue;
+      scratch[measured++] = static_cast<float>(obs[i].rgb(c) / (run_cosine * obs[i].irradiance));
+      run_cosine = 0.0;
     }
     std::nth_element(scratch, scratch + measured / 2, scratch + measured);
     albedo[c] = measured > 0 ? scratch[measured / 2] : 0.0f;
