@@ -82,8 +82,8 @@ struct FitContext {
   const SurfaceGeometry* geometry = nullptr;
   const FitOptions* options = nullptr;
   std::vector<ObservationInfo> observations;
-  // Largest number of entries a pixel's observations can take (facet runs: kMaxFacets for an
-  // observation of a tilted view when the geometry has fine normals), for buffer sizes.
+  // Largest number of entries a pixel's observations can take (facet runs: kMaxFacets for every
+  // observation when the geometry has fine normals), for buffer sizes.
   std::size_t max_entries = 0;
 };
 
