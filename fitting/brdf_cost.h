@@ -68,8 +68,8 @@ ParameterVector DefaultParameters();
 // One usable observation of one pixel, already in the pixel's local shading frame. Fixed size, so
 // per-pixel work can reuse one buffer per worker instead of allocating.
 //
-// Facet runs (fitting/facet_mixture.h): an observation that a tilted camera made of several facets
-// is a run of consecutive entries, one per facet, each with the light and view turned into that
+// Facet runs (fitting/facet_mixture.h): an observation of a pixel that holds several facets is a
+// run of consecutive entries, one per facet, each with the light and view turned into that
 // facet's frame (the pixel's frame turned by the facet's tilt) and its share `facet_weight`. Every
 // entry of the run but the last has `continues` set and carries no data (rgb and weight 0); the
 // last carries the measurement. The cost predicts the run as sum over its entries of facet_weight *

@@ -15,6 +15,7 @@
 // of a surface with no occlusion below the fine grid's pitch.
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 
 #include "core/image.h"
@@ -43,5 +44,13 @@ using FacetSet = std::array<Facet, kMaxFacets>;
 // own normal).
 int ViewFacets(const Image& fine_normals, int factor, int col, int row, const Eigen::Vector3d& view_world,
                FacetSet* out);
+
+// The turn that puts a world direction where the facet sees it relative to the pixel: seeing a
+// facet tilted from the pixel's unit normal `pixel_normal` is seeing every direction turned back
+// by that tilt. Shading the turned light and view in the pixel's frame shades the facet, whatever
+// normal the pixel is later given (the fit's gather and RenderFitted both use it).
+inline Eigen::Quaterniond TurnIntoFacet(const Eigen::Vector3d& pixel_normal, const Facet& facet) {
+  return Eigen::Quaterniond::FromTwoVectors(pixel_normal, facet.normal).conjugate();
+}
 
 }  // namespace u3mscan::fitting

@@ -17,6 +17,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 
 #include "core/elapsed.h"
@@ -101,6 +102,19 @@ double MedianLuminance(const Observation& o, std::size_t pixel_count) {
   return values[values.size() / 2];
 }
 
+// Empty when `geometry`'s fine normals (if any) fit `grid` (SurfaceGeometry), else what is wrong.
+std::string FineNormalsProblem(const SurfaceGeometry& geometry, const MetricGrid& grid) {
+  if (geometry.fine_normals.empty()) return {};
+  const int k = geometry.fine_factor;
+  if (k < 2 || k > kMaxFacetFactor) return "fine_factor must be 2 .. " + std::to_string(kMaxFacetFactor);
+  if (geometry.fine_normals.width() != k * grid.width || geometry.fine_normals.height() != k * grid.height ||
+      geometry.fine_normals.channels() != 3) {
+    return "fine_normals must be 3 channels on a grid fine_factor times the stack's (" + std::to_string(k * grid.width) +
+           " x " + std::to_string(k * grid.height) + ")";
+  }
+  return {};
+}
+
 void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options) {
   auto fail = [](const std::string& what) { throw std::invalid_argument("FitPrincipled: " + what); };
   if (!options.Check()) fail("invalid FitOptions (see FitOptions::Check)");
@@ -117,15 +131,7 @@ void ValidateInputs(const Stack& stack, const SurfaceGeometry& geometry, const F
   check_image(geometry.albedo, 3, "albedo", true);
   check_image(geometry.height_mm, 1, "height_mm", true);
   check_image(geometry.fibre_turn_deg, 1, "fibre_turn_deg", true);
-  if (!geometry.fine_normals.empty()) {
-    const int k = geometry.fine_factor;
-    if (k < 2 || k > kMaxFacetFactor) fail("fine_factor must be 2 .. " + std::to_string(kMaxFacetFactor));
-    if (geometry.fine_normals.width() != k * grid.width || geometry.fine_normals.height() != k * grid.height ||
-        geometry.fine_normals.channels() != 3) {
-      fail("fine_normals must be 3 channels on a grid fine_factor times the stack's (" + std::to_string(k * grid.width) +
-           " x " + std::to_string(k * grid.height) + ")");
-    }
-  }
+  if (const std::string problem = FineNormalsProblem(geometry, grid); !problem.empty()) fail(problem);
   if (stack.observations.empty()) fail("stack has no observations");
   for (std::size_t i = 0; i < stack.observations.size(); ++i) {
     const Observation& o = stack.observations[i];
@@ -211,12 +217,13 @@ struct PixelFacetCache {
   PixelFacetCache() { count.fill(-1); }
 };
 
-// Observation `info` of pixel `index` as world entries into `out`: one, or with fine normals, a
+// Observation `info` of pixel `index` as world entries into `out`: one, or with fine normals (and
+// then a `cache`, which is not read otherwise), a
 // facet run (LocalObservation): each facet's entry has the light and view turned by
 // the rotation from the pixel's normal to the facet's, so that whatever normal the fit gives the
 // pixel, the facet keeps its tilt from it. Returns the entries written (0: not usable).
 int WorldEntriesAt(const FitContext& context, const ObservationInfo& info, std::size_t index, int col, int row,
-                   const Eigen::Vector3d& point, PixelFacetCache& cache, WorldObservation* out) {
+                   const Eigen::Vector3d& point, PixelFacetCache* cache, WorldObservation* out) {
   WorldObservation plain;
   if (!WorldObservationAt(context, info, index, col, row, point, &plain)) return 0;
   const SurfaceGeometry& geometry = *context.geometry;
@@ -229,12 +236,12 @@ int WorldEntriesAt(const FitContext& context, const ObservationInfo& info, std::
   const FacetSet* facets = &computed;
   int count = 0;
   if (view < PixelFacetCache::kCachedViews) {
-    if (cache.count[view] < 0) {
-      cache.count[view] = ViewFacets(geometry.fine_normals, geometry.fine_factor, col, row, plain.view_world,
-                                     &cache.facets[view]);
+    if (cache->count[view] < 0) {
+      cache->count[view] = ViewFacets(geometry.fine_normals, geometry.fine_factor, col, row, plain.view_world,
+                                      &cache->facets[view]);
     }
-    facets = &cache.facets[view];
-    count = cache.count[view];
+    facets = &cache->facets[view];
+    count = cache->count[view];
   } else {
     count = ViewFacets(geometry.fine_normals, geometry.fine_factor, col, row, plain.view_world, &computed);
   }
@@ -245,8 +252,7 @@ int WorldEntriesAt(const FitContext& context, const ObservationInfo& info, std::
     return 1;
   }
   for (int f = 0; f < count; ++f) {
-    // Seeing the facet tilted from the pixel's normal is seeing every direction turned back by it.
-    const Eigen::Quaterniond back = Eigen::Quaterniond::FromTwoVectors(n / length, (*facets)[f].normal).conjugate();
+    const Eigen::Quaterniond back = TurnIntoFacet(n / length, (*facets)[f]);
     WorldObservation& entry = out[f];
     entry = plain;
     entry.light_world = back * plain.light_world;
@@ -283,10 +289,11 @@ int GatherWorldObservations(const FitContext& context, std::size_t index, std::v
   const int row = static_cast<int>(index / width);
   const Eigen::Vector3d point = SurfacePoint(context, col, row);
   if (out.size() < context.max_entries) out.resize(context.max_entries);
-  PixelFacetCache facets;
+  std::optional<PixelFacetCache> facets;  // 8 views x 9 facets: built only for a pixel with facets
+  if (!context.geometry->fine_normals.empty()) facets.emplace();
   int count = 0;
   for (const ObservationInfo& info : context.observations) {
-    count += WorldEntriesAt(context, info, index, col, row, point, facets, &out[count]);
+    count += WorldEntriesAt(context, info, index, col, row, point, facets ? &*facets : nullptr, &out[count]);
   }
   return count;
 }
@@ -307,9 +314,11 @@ int GatherPixelWithNormal(const FitContext& context, std::size_t index, Eigen::V
   const double min_cos = context.options->min_cos;
   int count = 0;
   std::array<WorldObservation, kMaxFacets> entries;
-  PixelFacetCache facets;
+  std::optional<PixelFacetCache> facets;  // as in GatherWorldObservations
+  if (!context.geometry->fine_normals.empty()) facets.emplace();
   for (const ObservationInfo& info : context.observations) {
-    const int entry_count = WorldEntriesAt(context, info, index, col, row, point, facets, entries.data());
+    const int entry_count =
+        WorldEntriesAt(context, info, index, col, row, point, facets ? &*facets : nullptr, entries.data());
     double run_cosine = 0.0;  // the run's cos_l: its facets' cosines with their shares
     for (int e = 0; e < entry_count; ++e) {
       LocalObservation& lo = out[count];
@@ -1329,13 +1338,10 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
       observation.view >= static_cast<int>(stack.views.size())) {
     throw std::invalid_argument("RenderFitted: observation light or view out of range");
   }
-  const bool facets_given = !geometry.fine_normals.empty();
-  if (facets_given && (geometry.fine_factor < 2 || geometry.fine_factor > kMaxFacetFactor ||
-                       geometry.fine_normals.width() != geometry.fine_factor * grid.width ||
-                       geometry.fine_normals.height() != geometry.fine_factor * grid.height ||
-                       geometry.fine_normals.channels() != 3)) {
-    throw std::invalid_argument("RenderFitted: fine_normals must be 3 channels, fine_factor times the stack's grid");
+  if (const std::string problem = FineNormalsProblem(geometry, grid); !problem.empty()) {
+    throw std::invalid_argument("RenderFitted: " + problem);
   }
+  const bool facets_given = !geometry.fine_normals.empty();
   Image out(grid.width, grid.height, 3, 0.0f, grid.pitch_mm);
   const LightModel& light = stack.lights[observation.light];
   const ViewGeometry& view = stack.views[observation.view];
@@ -1366,7 +1372,7 @@ Image RenderFitted(const FitResult& result, const Stack& stack, const SurfaceGeo
         const int facet_count =
             facets_given ? ViewFacets(geometry.fine_normals, geometry.fine_factor, col, static_cast<int>(row), vw, &facets) : 0;
         for (int f = 0; f < facet_count; ++f) {  // as the fit modelled this view (WorldEntriesAt)
-          const Eigen::Quaterniond back = Eigen::Quaterniond::FromTwoVectors(n, facets[f].normal).conjugate();
+          const Eigen::Quaterniond back = TurnIntoFacet(n, facets[f]);
           rgb += facets[f].weight * RenderLocal(params, c, frame.ToLocal(back * lw), frame.ToLocal(back * vw), e);
         }
         if (facet_count == 0) rgb = RenderLocal(params, c, frame.ToLocal(lw), frame.ToLocal(vw), e);

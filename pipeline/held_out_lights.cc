@@ -85,8 +85,7 @@ HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stac
   if (options.mark_cast_shadows && !geometry.height_mm.empty()) {
     reconstruction::MarkCastShadows(geometry.height_mm, &check, options.cast_shadows);
   }
-  const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm, Image(), geometry.fine_normals, geometry.fine_factor};
+  const fitting::SurfaceGeometry surface = SideSurface(geometry);
   HeldOutSums sums;
   sums.Add(fit, check, surface);
   return sums.Finish(SteadySeconds() - start);

@@ -284,14 +284,17 @@ fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, 
   return {normals, albedo, height_mm, FibreTurnsIfFollowed(normals, options), Image(), 1};
 }
 
+fitting::SurfaceGeometry SideSurface(const SideReconstruction& side) {
+  return {side.photometric_stereo.normal, side.photometric_stereo.albedo, side.height_mm, Image(), side.fine_normals,
+          side.fine_factor};
+}
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
-  fitting::SurfaceGeometry surface = FitGeometry(geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                                geometry.height_mm, options);
-  surface.fine_normals = geometry.fine_normals;  // the facets of a side with a tilted view (SideReconstruction)
-  surface.fine_factor = geometry.fine_factor;
+  fitting::SurfaceGeometry surface = SideSurface(geometry);
+  surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
   fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
   std::string detail = std::to_string(fit.clusters.size()) + " clusters";
   if (!surface.fine_normals.empty()) {
@@ -325,8 +328,7 @@ Image FitResidualMap(const fitting::FitResult& fit, const Stack& stack, const Si
   const int w = stack.grid.width, h = stack.grid.height;
   Image residual(w, h, 1, 0.0f, stack.grid.pitch_mm);
   std::vector<float> count(static_cast<std::size_t>(w) * h, 0.0f);
-  const fitting::SurfaceGeometry surface{geometry.photometric_stereo.normal, geometry.photometric_stereo.albedo,
-                                         geometry.height_mm, Image(), geometry.fine_normals, geometry.fine_factor};
+  const fitting::SurfaceGeometry surface = SideSurface(geometry);
   const int n = static_cast<int>(stack.observations.size());
   const int used = std::min(n, std::max(1, max_observations));
   for (int k = 0; k < used; ++k) {

@@ -87,6 +87,10 @@ Image FibreTurnsIfFollowed(const Image& normals, const StageOptions& options);
 fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, const Image& height_mm,
                                      const StageOptions& options);
 
+// A side's reconstruction as the fit and its re-renders read it: normals, albedo, heights and the
+// facets of the finer grid (SideReconstruction::fine_normals); no fibre turns (FitSide adds them).
+fitting::SurfaceGeometry SideSurface(const SideReconstruction& side);
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 
