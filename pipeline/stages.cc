@@ -289,6 +289,10 @@ fitting::SurfaceGeometry SideSurface(const SideReconstruction& side) {
           side.fine_factor};
 }
 
+std::string FacetsDetail(int fine_factor) {
+  return ", every photograph fitted as the mixture of the " + std::to_string(fine_factor) + "x finer grid's facets";
+}
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
@@ -297,10 +301,7 @@ fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometr
   surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
   fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
   std::string detail = std::to_string(fit.clusters.size()) + " clusters";
-  if (!surface.fine_normals.empty()) {
-    detail += ", every photograph fitted as the mixture of the " + std::to_string(surface.fine_factor) +
-              "x finer grid's facets";
-  }
+  if (!surface.fine_normals.empty()) detail += FacetsDetail(surface.fine_factor);
   ReportFitStep(fit, detail, SteadySeconds() - start, report);
   return fit;
 }

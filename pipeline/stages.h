@@ -91,6 +91,9 @@ fitting::SurfaceGeometry FitGeometry(const Image& normals, const Image& albedo, 
 // facets of the finer grid (SideReconstruction::fine_normals); no fibre turns (FitSide adds them).
 fitting::SurfaceGeometry SideSurface(const SideReconstruction& side);
 
+// The fit step's words for a fit that takes the facets of a grid `fine_factor` times finer.
+std::string FacetsDetail(int fine_factor);
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
 

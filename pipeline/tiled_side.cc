@@ -163,9 +163,16 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
 
 // The surface the fit and the held-out check see on a band: the reconstruction's rows of it, and
 // the rows of the fibres' turns when there are any (`turns`, on the whole grid).
-fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows, const Image& turns = Image()) {
-  return {CropRows(geometry.photometric_stereo.normal, row0, rows), CropRows(geometry.photometric_stereo.albedo, row0, rows),
-          CropRows(geometry.height_mm, row0, rows), turns.empty() ? Image() : CropRows(turns, row0, rows), Image(), 1};
+// `facets` (may be empty): the whole side's normals `fine_factor` times finer, which the fit takes
+// as each map pixel's facets (SideReconstruction::fine_normals); the band's k rows a map row.
+fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows, const Image& turns = Image(),
+                                     const Image& facets = Image(), int fine_factor = 1) {
+  return {CropRows(geometry.photometric_stereo.normal, row0, rows),
+          CropRows(geometry.photometric_stereo.albedo, row0, rows),
+          CropRows(geometry.height_mm, row0, rows),
+          turns.empty() ? Image() : CropRows(turns, row0, rows),
+          facets.empty() ? Image() : CropRows(facets, row0 * fine_factor, rows * fine_factor),
+          facets.empty() ? 1 : fine_factor};
 }
 
 }  // namespace
@@ -624,6 +631,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.reconstruction.cast_shadow_solved_again_share = shadow_height.empty() || near ? -1.0 : solved_again_share;
   IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
   const SideReconstruction& geometry = out.reconstruction;
+  // A tilted view with a finer grid: the fit takes the fine solves' normals as the facets each
+  // camera sees in a map pixel, as one band does (ReconstructSideSupersampled; docs/fitting.md,
+  // "Facets of the finer grid").
+  const bool fit_facets = fine_factor > 1 && options.fit_facets && NeedsReliefRegistration(out.sample);
 
   // Fit: clusters on the sample, then the per-pixel step band by band.
   ReportObliqueView(out.sample, report);
@@ -635,7 +646,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // marks'. 4 B a fine pixel each, made when a fine pass below needs them.
   const MetricGrid& fine_grid = fine_calibration.grid;
   Image fine_surface_height, fine_solve_height, fine_marks;
-  if (fine_fit) {
+  if (fine_fit || fit_facets) {
     fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
     if (!fine_near_height.empty()) {
       fine_solve_height = fine_near_height;  // near lights' last round on the fine grid
@@ -679,6 +690,22 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
     return surface;
   };
+  // The facets: the fine solves' normals on the whole fine grid (12 B a fine pixel). A tilted view's
+  // run has no fine pass of the fit and keeps no fine solve: each fine band is solved again as the
+  // last sweep solved it (one more sweep of the fine bands).
+  Image facet_normals;
+  if (fit_facets) {
+    if (!fine_fit_normal.empty()) {
+      facet_normals = fine_fit_normal;
+    } else {
+      facet_normals = Image(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
+      for (int b = 0; b < fine_bands.count(); ++b) {
+        Stack band;
+        PasteRows(fine_band_surface(b, &band).normals, fine_bands.Row0(b), &facet_normals);
+        ReportProgress(progress, "fit: facets on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
+      }
+    }
+  }
   // The clusters on the finer grid: the sample gathered by the last photometric stereo sweep (above),
   // else (near lights refined in rounds) in one more sweep of the fine bands, solved as that sweep
   // solved them; its heights from the whole fine grid's.
@@ -710,6 +737,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     SampleRows(geometry.photometric_stereo.albedo, 0, step, sample_grid, &sample_geometry.albedo);
     SampleRows(geometry.height_mm, 0, step, sample_grid, &sample_geometry.height_mm);
     if (!maps_turns.empty()) SampleRows(maps_turns, 0, step, sample_grid, &sample_geometry.fibre_turn_deg);
+    if (fit_facets) {
+      sample_geometry.fine_normals = SampleFineBlocks(facet_normals, fine_factor, step, sample_grid);
+      sample_geometry.fine_factor = fine_factor;
+    }
   }
   const fitting::ClusterModel model = fitting::FitClusterModel(out.sample, sample_geometry, options.fit, progress);
   out.fit = fitting::StartPixelMaps(model, grid);
@@ -718,7 +749,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     Stack band = bands.Build(frames, b);
     if (!shadow_height.empty()) mark(shadow_height, grid, &band);
     const int row0 = bands.Row0(b);
-    fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b), maps_turns), row0, &out.fit, &tally);
+    fitting::FitPixelRows(model, band, BandSurface(geometry, row0, bands.Rows(b), maps_turns, facet_normals, fine_factor),
+                          row0, &out.fit, &tally);
     ReportProgress(progress, "fit: pixels", static_cast<double>(b + 1) / bands.count());
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
@@ -789,6 +821,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        ", pixels band by band (band rebuild " +
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
                        " s included)";
+  if (fit_facets) detail += FacetsDetail(fine_factor);
   if (fine_fit_seconds > 0.0) {
     char fine_detail[160];
     std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it; %s)", fine_factor,
@@ -815,6 +848,10 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     band_geometry.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);
     band_geometry.photometric_stereo.albedo = CropRows(geometry.photometric_stereo.albedo, row0, rows);
     band_geometry.height_mm = CropRows(geometry.height_mm, row0, rows);
+    if (fit_facets) {
+      band_geometry.fine_normals = CropRows(facet_normals, row0 * fine_factor, rows * fine_factor);
+      band_geometry.fine_factor = fine_factor;
+    }
     double mean = 0.0;
     std::size_t pixels = 0;
     PasteRows(FitResidualMap(BandFit(out.fit, row0, rows), band, band_geometry, used, &mean, &pixels), row0,
@@ -838,7 +875,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         reconstruction::MarkCastShadows(geometry.height_mm, grid, &band, options.cast_shadows);
       }
       const int row0 = bands.Row0(b), rows = bands.Rows(b);
-      sums.Add(BandFit(out.fit, row0, rows), band, BandSurface(geometry, row0, rows));
+      sums.Add(BandFit(out.fit, row0, rows), band, BandSurface(geometry, row0, rows, Image(), facet_normals, fine_factor));
       ReportProgress(progress, "held-out lights", static_cast<double>(b + 1) / bands.count());
     }
     out.held_out = sums.Finish(SteadySeconds() - start);

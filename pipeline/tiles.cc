@@ -56,4 +56,20 @@ void SampleRows(const Image& band, int row0, int step, const MetricGrid& sample_
   }
 }
 
+Image SampleFineBlocks(const Image& fine, int fine_factor, int step, const MetricGrid& sample_grid) {
+  const int k = fine_factor, o = step / 2;
+  Image out(sample_grid.width * k, sample_grid.height * k, fine.channels(), 0.0f, sample_grid.pitch_mm / k);
+  for (int c = 0; c < fine.channels(); ++c) {
+    for (int i = 0; i < sample_grid.height; ++i) {
+      for (int a = 0; a < k; ++a) {
+        const int from_row = (o + i * step) * k + a;
+        for (int j = 0; j < sample_grid.width; ++j) {
+          for (int b = 0; b < k; ++b) out.at(c, i * k + a, j * k + b) = fine.at(c, from_row, (o + j * step) * k + b);
+        }
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace u3mscan

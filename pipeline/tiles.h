@@ -53,5 +53,9 @@ MetricGrid SampleGrid(const MetricGrid& grid, int step);
 // Copies the sampled pixels of an image covering grid rows [row0, row0 + image rows) into `sample`
 // (allocated on the sample grid when empty).
 void SampleRows(const Image& band, int row0, int step, const MetricGrid& sample_grid, Image* sample);
+// The fine pixels of the sampled pixels: `fine` covers the whole grid `fine_factor` k times finer
+// (k rows and columns a grid pixel); sample pixel (i, j) gets the k x k block of its grid pixel, so
+// the result is the sample grid k times finer (fitting::SurfaceGeometry::fine_normals of a sample).
+Image SampleFineBlocks(const Image& fine, int fine_factor, int step, const MetricGrid& sample_grid);
 
 }  // namespace u3mscan

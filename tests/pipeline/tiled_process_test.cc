@@ -157,6 +157,39 @@ TEST_F(TiledTest, PlanCutsEvenBandsWithinTheBudget) {
   EXPECT_NEAR(sample.PixelCentreInWorld(3, 5).y(), grid.PixelCentreInWorld(0, 4 * 5 + 2).y(), 1e-9);
 }
 
+// The fine blocks of the sampled pixels: sample pixel (i, j) holds the k x k fine pixels of grid
+// pixel (k_s j + k_s / 2, k_s i + k_s / 2), in their order, on the sample grid k times finer.
+TEST(SampleFineBlocks, EachSampledPixelGetsItsOwnFineBlock) {
+  constexpr int kFine = 3, kStep = 4;
+  MetricGrid grid;
+  grid.width = 10, grid.height = 7, grid.pitch_mm = 0.1;
+  const MetricGrid sample_grid = SampleGrid(grid, kStep);
+  // Each fine pixel holds (row, column, channel) as a number of its own.
+  Image fine(grid.width * kFine, grid.height * kFine, 2, 0.0f, grid.pitch_mm / kFine);
+  for (int c = 0; c < 2; ++c) {
+    for (int r = 0; r < fine.height(); ++r) {
+      for (int q = 0; q < fine.width(); ++q) fine.at(c, r, q) = static_cast<float>(1000 * r + 10 * q + c);
+    }
+  }
+  const Image blocks = SampleFineBlocks(fine, kFine, kStep, sample_grid);
+  ASSERT_EQ(blocks.width(), sample_grid.width * kFine);
+  ASSERT_EQ(blocks.height(), sample_grid.height * kFine);
+  ASSERT_EQ(blocks.channels(), 2);
+  EXPECT_NEAR(blocks.pitch_mm(), sample_grid.pitch_mm / kFine, 1e-12);
+  for (int c = 0; c < 2; ++c) {
+    for (int i = 0; i < sample_grid.height; ++i) {
+      for (int j = 0; j < sample_grid.width; ++j) {
+        for (int a = 0; a < kFine; ++a) {
+          for (int b = 0; b < kFine; ++b) {
+            const int row = (kStep * i + kStep / 2) * kFine + a, col = (kStep * j + kStep / 2) * kFine + b;
+            EXPECT_EQ(blocks.at(c, i * kFine + a, j * kFine + b), fine.at(c, row, col)) << i << " " << j;
+          }
+        }
+      }
+    }
+  }
+}
+
 Image ReadMap(const fs::path& out, const std::string& name) {
   return ReadImageFile(out / "maps" / (name + ".exr"), PixelEncoding::kLinear);
 }
