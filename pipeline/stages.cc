@@ -268,6 +268,13 @@ void ReportObliqueView(const Stack& stack, RunReport* report) {
 }
 
 void ReportFitStep(const fitting::FitResult& fit, std::string detail, double seconds, RunReport* report) {
+  // Where the time went (fitting::StageTimes), so that a slow fit says which stage made it slow.
+  const fitting::StageTimes& t = fit.times;
+  char stages[200];
+  std::snprintf(stages, sizeof stages,
+                "; gather %.1f s, clustering %.1f s, cluster fits %.1f s (observability %.1f s of it), pixels %.1f s",
+                t.gather_s, t.clustering_s, t.cluster_fit_s, t.observability_s, t.per_pixel_s);
+  detail += stages;
   if (!fit.convergence.all_converged) {
     detail += ", " + std::to_string(fit.convergence.clusters_failed) + " did not converge";
     for (const auto& message : fit.convergence.messages) report->warnings.push_back("fit: " + message);

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "pipeline/stages.h"
+
 namespace u3mscan {
 namespace {
 
@@ -65,6 +67,25 @@ TEST(RunReport, JsonHasEveryFigure) {
   EXPECT_DOUBLE_EQ(j["steps"][1]["seconds"].get<double>(), 1.25);
   EXPECT_EQ(j["parameters"][0]["source"], "not measured (U3M default)");
   EXPECT_DOUBLE_EQ(j["quality"]["mean_confidence"].get<double>(), 0.93);
+}
+
+// The fit step says where its time went, stage by stage (fitting::StageTimes), after what it did.
+TEST(RunReport, TheFitStepGivesTheTimeOfEachStage) {
+  fitting::FitResult fit;
+  fit.times.gather_s = 1.3;
+  fit.times.clustering_s = 0.5;
+  fit.times.cluster_fit_s = 12.0;
+  fit.times.observability_s = 3.0;
+  fit.times.per_pixel_s = 40.0;
+  RunReport report;
+  ReportFitStep(fit, "8 clusters", 54.0, &report);
+  ASSERT_EQ(report.steps.size(), 1u);
+  const StepRecord& step = report.steps[0];
+  EXPECT_EQ(step.name, "fit");
+  EXPECT_TRUE(step.ran);
+  EXPECT_DOUBLE_EQ(step.seconds, 54.0);
+  EXPECT_EQ(step.reason,
+            "8 clusters; gather 1.3 s, clustering 0.5 s, cluster fits 12.0 s (observability 3.0 s of it), pixels 40.0 s");
 }
 
 }  // namespace
