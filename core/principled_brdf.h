@@ -200,41 +200,93 @@ T ClearcoatLobe(const PrincipledParams<T>& p, const T& cos_l, const T& cos_v, co
 
 }  // namespace brdf
 
+namespace brdf {
+
+// What every lobe needs of the directions, before any colour enters: computed once for
+// EvaluatePrincipled and EvaluatePrincipledColourParts, so the two cannot disagree.
+template <typename T>
+struct LobeGeometry {
+  T cos_l, cos_v, cos_h, cos_d;  // with the normal (z) and, cos_d, between L and the half vector
+  T diffuse_weight;              // diffuse (mixed with subsurface) per unit base colour, 1/sr
+  T specular;                    // G D of the specular lobe, 1/sr per unit Fresnel reflectance
+};
+
+// False (and `g` untouched) when either direction is at or below the horizon: every lobe is 0.
+template <typename T>
+bool EvaluateLobeGeometry(const PrincipledParams<T>& p, const Vec3<T>& l, const Vec3<T>& v, LobeGeometry<T>* g) {
+  using std::sqrt;
+  const T cos_l = l(2);
+  const T cos_v = v(2);
+  if (!(cos_l > T(0)) || !(cos_v > T(0))) return false;
+
+  Vec3<T> h = l + v;
+  T h_len = sqrt(h.squaredNorm());
+  if (h_len < T(kTinyLength)) h_len = T(kTinyLength);
+  h /= h_len;
+  g->cos_l = cos_l;
+  g->cos_v = cos_v;
+  g->cos_h = h(2);
+  g->cos_d = l.dot(h);
+
+  // Diffuse and subsurface, mixed, then (by the caller) scaled by C / pi. Fabric fits and renders
+  // have no subsurface and no clearcoat: those lobes are skipped when their weights are exactly 0
+  // (IsExactlyZero), about a third of the evaluation.
+  const T fd = DisneyDiffuse(cos_l, cos_v, g->cos_d, p.roughness);
+  g->diffuse_weight =
+      (IsExactlyZero(p.subsurface) ? fd : Mix(fd, DisneySubsurface(cos_l, cos_v, g->cos_d, p.roughness), p.subsurface)) /
+      T(kPi);
+
+  T alpha_x, alpha_y;
+  AnisotropicAlphas(p.roughness, p.anisotropic, &alpha_x, &alpha_y);
+  const T d = Gtr2AnisotropicD(h, alpha_x, alpha_y);
+  const T g1 = SmithGgxAnisotropicG1(l, alpha_x, alpha_y) * SmithGgxAnisotropicG1(v, alpha_x, alpha_y);
+  g->specular = g1 * d;
+  return true;
+}
+
+}  // namespace brdf
+
 // The whole BRDF f(L, V) in 1/sr, linear RGB. L and V unit vectors in the local frame (z = normal).
 // Zero when either direction is at or below the horizon.
 template <typename T>
 Vec3<T> EvaluatePrincipled(const PrincipledParams<T>& p, const Vec3<T>& l, const Vec3<T>& v) {
-  using std::sqrt;
-  const T cos_l = l(2);
-  const T cos_v = v(2);
-  if (!(cos_l > T(0)) || !(cos_v > T(0))) return Vec3<T>::Zero();
+  brdf::LobeGeometry<T> g;
+  if (!brdf::EvaluateLobeGeometry(p, l, v, &g)) return Vec3<T>::Zero();
+  // Sheen adds on top of the diffuse (both dielectric only).
+  const Vec3<T> dielectric = p.base_color * g.diffuse_weight + brdf::SheenLobe(p, g.cos_d);
+  const Vec3<T> f = brdf::SchlickFresnel(brdf::SpecularF0(p), g.cos_d);
 
-  Vec3<T> h = l + v;
-  T h_len = sqrt(h.squaredNorm());
-  if (h_len < T(brdf::kTinyLength)) h_len = T(brdf::kTinyLength);
-  h /= h_len;
-  const T cos_h = h(2);
-  const T cos_d = l.dot(h);
-
-  // Diffuse and subsurface, mixed, then scaled by C / pi; sheen adds on top (both dielectric only).
-  // Fabric fits and renders have no subsurface and no clearcoat: those lobes are skipped when
-  // their weights are exactly 0 (IsExactlyZero), about a third of the evaluation.
-  const T fd = brdf::DisneyDiffuse(cos_l, cos_v, cos_d, p.roughness);
-  const T diffuse_weight =
-      (brdf::IsExactlyZero(p.subsurface) ? fd
-                                         : brdf::Mix(fd, brdf::DisneySubsurface(cos_l, cos_v, cos_d, p.roughness), p.subsurface)) /
-      T(brdf::kPi);
-  const Vec3<T> dielectric = p.base_color * diffuse_weight + brdf::SheenLobe(p, cos_d);
-
-  T alpha_x, alpha_y;
-  brdf::AnisotropicAlphas(p.roughness, p.anisotropic, &alpha_x, &alpha_y);
-  const T d = brdf::Gtr2AnisotropicD(h, alpha_x, alpha_y);
-  const T g = brdf::SmithGgxAnisotropicG1(l, alpha_x, alpha_y) * brdf::SmithGgxAnisotropicG1(v, alpha_x, alpha_y);
-  const Vec3<T> f = brdf::SchlickFresnel(brdf::SpecularF0(p), cos_d);
-
-  const Vec3<T> lobes = dielectric * (T(1) - p.metallic) + f * (g * d);
+  const Vec3<T> lobes = dielectric * (T(1) - p.metallic) + f * g.specular;
   if (brdf::IsExactlyZero(p.clearcoat)) return lobes;
-  return lobes + Vec3<T>::Constant(brdf::ClearcoatLobe(p, cos_l, cos_v, cos_h, cos_d));
+  return lobes + Vec3<T>::Constant(brdf::ClearcoatLobe(p, g.cos_l, g.cos_v, g.cos_h, g.cos_d));
+}
+
+// The BRDF as three scalars per direction pair, for every base colour at once (p.base_color is
+// not read): f(C) = C per_colour + TintColor(C) per_tint + white, in 1/sr. Each lobe is linear in
+// C, in its tint or in white (diffuse and metal Fresnel in C; sheen and dielectric Fresnel in the
+// tint as far as sheen_tint and specular_tint say, in white for the rest; Fresnel's grazing part
+// and clearcoat in white). The fitter solves the base colour in closed form with these, evaluating
+// the lobes once per observation instead of once per pass of its luminance iteration.
+template <typename T>
+struct PrincipledColourParts {
+  T per_colour = T(0), per_tint = T(0), white = T(0);
+};
+
+template <typename T>
+PrincipledColourParts<T> EvaluatePrincipledColourParts(const PrincipledParams<T>& p, const Vec3<T>& l, const Vec3<T>& v) {
+  PrincipledColourParts<T> parts;
+  brdf::LobeGeometry<T> g;
+  if (!brdf::EvaluateLobeGeometry(p, l, v, &g)) return parts;
+  const T grazing = brdf::SchlickWeight(g.cos_d);  // Fresnel's and sheen's
+  const T dielectric = T(1) - p.metallic;
+  const T sheen = p.sheen * grazing * dielectric;
+  // The dielectric F0 (0.08 specular, white or tinted) through Fresnel's (1 - grazing) and G D.
+  const T dielectric_specular = T(0.08) * p.specular * (T(1) - grazing) * g.specular * dielectric;
+  parts.per_colour = g.diffuse_weight * dielectric + p.metallic * (T(1) - grazing) * g.specular;
+  parts.per_tint = sheen * p.sheen_tint + dielectric_specular * p.specular_tint;
+  parts.white = sheen * (T(1) - p.sheen_tint) + dielectric_specular * (T(1) - p.specular_tint) + grazing * g.specular;
+  if (!brdf::IsExactlyZero(p.clearcoat)) parts.white += brdf::ClearcoatLobe(p, g.cos_l, g.cos_v, g.cos_h, g.cos_d);
+  return parts;
 }
 
 }  // namespace u3mscan

@@ -72,13 +72,28 @@ T RobustFactor(const T& sq, const RobustLoss& loss) {
   return T(1);
 }
 
-// Core of the cost for any scalar type. `scratch` holds 2 values per observation (A_o, s_o).
+// Core of the cost for any scalar type. `scratch` holds 5 values per observation: the run's A_o and
+// s_o, then the entry's colour parts (EvaluatePrincipledColourParts) times its cos_l E share.
 template <typename T>
 Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observations, const PixelCostSettings& settings,
                         T* residuals, std::vector<T>& scratch) {
   using std::abs;
   const std::size_t n = observations.size();
-  scratch.resize(2 * n);
+  scratch.resize(5 * n);
+  T* parts = scratch.data() + 2 * n;
+  // The lobes once per entry: the passes below only weigh them by the luminance. Per unit base
+  // colour C of luminance l the tint is C / l, so an entry predicts C (per_colour + per_tint / l)
+  // + white: linear in C once l is fixed.
+  const PrincipledParams<T> params = ToPrincipled(p, Vec3<T>(Vec3<T>::Zero()));  // the colour is not read
+  for (std::size_t i = 0; i < n; ++i) {
+    const LocalObservation& o = observations[i];
+    const PrincipledColourParts<T> f =
+        EvaluatePrincipledColourParts(params, Vec3<T>(o.light_local.cast<T>()), Vec3<T>(o.view_local.cast<T>()));
+    const double geometry = o.light_local.z() * o.irradiance * o.facet_weight;  // cos_l * E * share
+    parts[3 * i] = f.per_colour * geometry;
+    parts[3 * i + 1] = f.per_tint * geometry;
+    parts[3 * i + 2] = f.white * geometry;
+  }
   T luminance = T(std::max(settings.luminance_start, kMinLuminance));
   Vec3<T> color = Vec3<T>::Zero();
   const int passes = std::max(1, settings.luminance_passes);
@@ -100,22 +115,15 @@ Vec3<T> PixelResidualsT(const T* p, std::span<const LocalObservation> observatio
       previous_h = h;
       luminance = next < T(kMinLuminance) ? T(kMinLuminance) : next;
     }
-    // Probe colour of luminance l: its tint is (1/0.3, 0, 0), the tint of every colour of that
-    // luminance scaled the same way, so f(probe) separates A (red minus green) from s (green).
-    const Vec3<T> probe(luminance / T(brdf::kTintLumR), T(0), T(0));
-    const PrincipledParams<T> params = ToPrincipled(p, probe);
+    const T inverse_luminance = T(1) / luminance;
     T num[3] = {T(0), T(0), T(0)};
     T den[3] = {T(0), T(0), T(0)};
     // A facet run's A and s are the sums over its entries (the model is linear in C per entry).
     T run_a = T(0), run_s = T(0);
     for (std::size_t i = 0; i < n; ++i) {
       const LocalObservation& o = observations[i];
-      const Vec3<T> l = o.light_local.cast<T>();
-      const Vec3<T> v = o.view_local.cast<T>();
-      const Vec3<T> f = EvaluatePrincipled(params, l, v);
-      const double geometry = o.light_local.z() * o.irradiance * o.facet_weight;  // cos_l * E * share
-      run_a += (f(0) - f(1)) * (T(brdf::kTintLumR) * geometry) / luminance;
-      run_s += f(1) * geometry;
+      run_a += parts[3 * i] + parts[3 * i + 1] * inverse_luminance;
+      run_s += parts[3 * i + 2];
       if (o.continues) {  // no data here: residual slots 0
         scratch[2 * i] = T(0);
         scratch[2 * i + 1] = T(0);

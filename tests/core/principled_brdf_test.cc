@@ -258,6 +258,36 @@ TEST(PrincipledBrdf, LobesOfWeightZeroAreLeftOutExactlyButStillDifferentiated) {
   }
 }
 
+// The colour parts give the whole BRDF for every base colour: C per_colour + TintColor(C) per_tint
+// + white, with every lobe on (metallic, subsurface, clearcoat, anisotropy), a black colour (white
+// tint) and a pair below the horizon (all 0). To rounding: the same lobes, summed in another order.
+constexpr double kColourPartsTolerance = 1e-12;  // relative to the BRDF's largest channel (or 1)
+TEST(PrincipledBrdf, ColourPartsGiveTheBrdfOfEveryBaseColour) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 500; ++trial) {
+    PrincipledParams<double> p = RandomParams(rng);
+    if (trial % 5 == 0) p.clearcoat = 0.0;
+    if (trial % 7 == 0) p.subsurface = 0.0;
+    const Vec3d l = RandomUpperDirection(rng), v = RandomUpperDirection(rng);
+    const PrincipledColourParts<double> parts = EvaluatePrincipledColourParts(p, l, v);
+    for (const Vec3d& colour : {p.base_color, Vec3d(0.0, 0.0, 0.0), Vec3d(1.0, 0.2, 0.05)}) {
+      PrincipledParams<double> coloured = p;
+      coloured.base_color = colour;
+      const Vec3d f = EvaluatePrincipled(coloured, l, v);
+      const Vec3d from_parts = colour * parts.per_colour + brdf::TintColor(colour) * parts.per_tint +
+                               Vec3d::Constant(parts.white);
+      const double scale = std::max(1.0, f.cwiseAbs().maxCoeff());
+      EXPECT_NEAR((from_parts - f).cwiseAbs().maxCoeff() / scale, 0.0, kColourPartsTolerance) << trial;
+    }
+  }
+  const PrincipledColourParts<double> below =
+      EvaluatePrincipledColourParts(RandomParams(rng), Direction(95.0, 10.0), Direction(30.0, 0.0));
+  EXPECT_EQ(below.per_colour, 0.0);
+  EXPECT_EQ(below.per_tint, 0.0);
+  EXPECT_EQ(below.white, 0.0);
+}
+
 TEST(PrincipledBrdf, RunsOnFloat) {
   PrincipledParams<float> p;
   const Vec3<float> l(0.0f, 0.6f, 0.8f), v(0.0f, 0.0f, 1.0f);
