@@ -643,11 +643,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // --ps-supersample: a fine band with the last sweep's normals and albedo (kept above, else solved
   // again as the last sweep solved it), its heights from the whole fine grid's: the surface's
   // (bilinear), the last solve's for the near lights' vectors (empty: the anchor plane) and the
-  // marks'. 4 B a fine pixel each, made when a fine pass below needs them.
+  // marks'. 4 B a fine pixel each, made when a fine pass below needs them (the facets' solve needs
+  // the last two, not the surface's).
   const MetricGrid& fine_grid = fine_calibration.grid;
   Image fine_surface_height, fine_solve_height, fine_marks;
   if (fine_fit || fit_facets) {
-    fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
+    if (fine_fit) fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
     if (!fine_near_height.empty()) {
       fine_solve_height = fine_near_height;  // near lights' last round on the fine grid
     } else if (!geometry.photometric_stereo.height_mm.empty()) {
