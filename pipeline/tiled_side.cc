@@ -414,6 +414,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     out.sample = sample_sweep("photometric stereo (sample)");
     keep_checked_frames();
   }
+  // A tilted view with a finer grid: the fit takes the fine solves' normals as the facets each
+  // camera sees in a map pixel, as one band does (ReconstructSideSupersampled; docs/fitting.md,
+  // "Facets of the finer grid"): the whole fine grid's, 12 B a fine pixel.
+  const bool fit_facets = fine_factor > 1 && options.fit_facets && NeedsReliefRegistration(out.sample);
+  Image facet_normals;
   // Fine bands of distant lights whose shadows are marked: the first solve's fine normals kept
   // for the fine heights (fine_shadow_height above). Near lights refined on fine bands: every
   // sweep's, for the next round's heights. The sample, and so the lights, are known.
@@ -515,6 +520,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     reconstruction::IntegrationOptions fine_integration = ps_options.integration;
     fine_integration.pitch_mm = fine_calibration.grid.pitch_mm;
     Image fine_round_height, fine_kept_height;  // the round's fine heights and the round's before
+    bool last_round_rejected = false;  // the kept round is the one before the last sweep
     reconstruction::CastShadowCounts counts_before_sweep = shadow_counts;
     const double solve_before = solve_seconds, shadow_before = shadow_seconds, start = SteadySeconds();
     ps = reconstruction::RefineNearLightHeights(
@@ -532,9 +538,13 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
         },
         [&](const Image&, bool kept_round) {
           if (!kept_round) return;
+          last_round_rejected = true;
           shadow_counts = counts_before_sweep;
           if (fine_near_rounds) fine_round_height = std::move(fine_kept_height);
         });
+    // The last sweep's fine normals are the kept round's unless that round was rejected: the
+    // facets, without solving the fine bands again.
+    if (fit_facets && fine_near_rounds && !last_round_rejected) facet_normals = std::move(fine_last_normal);
     fine_last_normal = Image();
     fine_last_confidence = Image();
     // The kept round's fine heights: the fit's fine bands are solved and marked at them.
@@ -631,10 +641,6 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   out.reconstruction.cast_shadow_solved_again_share = shadow_height.empty() || near ? -1.0 : solved_again_share;
   IntegrateSide(grid, near, options, alpha, &out.reconstruction, report, progress);
   const SideReconstruction& geometry = out.reconstruction;
-  // A tilted view with a finer grid: the fit takes the fine solves' normals as the facets each
-  // camera sees in a map pixel, as one band does (ReconstructSideSupersampled; docs/fitting.md,
-  // "Facets of the finer grid").
-  const bool fit_facets = fine_factor > 1 && options.fit_facets && NeedsReliefRegistration(out.sample);
 
   // Fit: clusters on the sample, then the per-pixel step band by band.
   ReportObliqueView(out.sample, report);
@@ -647,7 +653,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // the last two, not the surface's).
   const MetricGrid& fine_grid = fine_calibration.grid;
   Image fine_surface_height, fine_solve_height, fine_marks;
-  if (fine_fit || fit_facets) {
+  if (fine_fit || (fit_facets && facet_normals.empty())) {
     if (fine_fit) fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
     if (!fine_near_height.empty()) {
       fine_solve_height = fine_near_height;  // near lights' last round on the fine grid
@@ -665,7 +671,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
   }
   // Its normals and albedo (the surface's heights are the caller's to add).
-  auto fine_band_surface = [&](int b, Stack* band) -> fitting::SurfaceGeometry {
+  auto fine_band_surface = [&](int b, Stack* band, bool with_fibre_turns = true) -> fitting::SurfaceGeometry {
     *band = fine_bands.Build(frames, b);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     if (!fine_band_marks.empty()) {
@@ -688,21 +694,20 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     // The fibres' turns of a band, from its own normals (within the window's reach of a band edge,
     // a few fine rows, they differ slightly from one band's).
-    surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
+    if (with_fibre_turns) surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
     return surface;
   };
-  // The facets: the fine solves' normals on the whole fine grid (12 B a fine pixel). A tilted view's
-  // run has no fine pass of the fit and keeps no fine solve: each fine band is solved again as the
-  // last sweep solved it (one more sweep of the fine bands).
-  Image facet_normals;
-  if (fit_facets) {
+  // The facets, unless the near-light rounds left them: a tilted view's run has no fine pass of the
+  // fit and keeps no other fine solve, so each fine band is solved again as the last sweep solved
+  // it (one more sweep of the fine bands; no fibre turns, which the facets do not use).
+  if (fit_facets && facet_normals.empty()) {
     if (!fine_fit_normal.empty()) {
       facet_normals = fine_fit_normal;
     } else {
       facet_normals = Image(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
       for (int b = 0; b < fine_bands.count(); ++b) {
         Stack band;
-        PasteRows(fine_band_surface(b, &band).normals, fine_bands.Row0(b), &facet_normals);
+        PasteRows(fine_band_surface(b, &band, /*with_fibre_turns=*/false).normals, fine_bands.Row0(b), &facet_normals);
         ReportProgress(progress, "fit: facets on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
       }
     }
