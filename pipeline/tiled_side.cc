@@ -542,13 +542,23 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
           shadow_counts = counts_before_sweep;
           if (fine_near_rounds) fine_round_height = std::move(fine_kept_height);
         });
+    // Each fine height's share of the surface (empty when the parallax is off), from the last
+    // sweep's fine normals, for the maps' heights below.
+    const Image fine_height_weights =
+        fine_near_rounds ? SurfaceAreaWeights(fine_last_normal, options.integration.parallax) : Image();
     // The last sweep's fine normals are the kept round's unless that round was rejected: the
     // facets, without solving the fine bands again.
     if (fit_facets && fine_near_rounds && !last_round_rejected) facet_normals = std::move(fine_last_normal);
     fine_last_normal = Image();
     fine_last_confidence = Image();
-    // The kept round's fine heights: the fit's fine bands are solved and marked at them.
-    if (ps.near_iterations > 0) fine_near_height = std::move(fine_round_height);
+    // The kept round's fine heights: the fit's fine bands are solved and marked at them, and the
+    // maps' heights are their block means, as one band's are (AveragePhotometricStereoOntoMaps of
+    // its fine side): the rounds' heights, integrated on the maps' grid from the averaged normals,
+    // miss the steps between a map pixel's facets.
+    if (ps.near_iterations > 0 && !fine_round_height.empty()) {
+      fine_near_height = std::move(fine_round_height);
+      ps.height_mm = BlockWeightedMean(fine_near_height, fine_height_weights, fine_factor, grid.pitch_mm);
+    }
     // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
     // photometric stereo's.
     solve_seconds = solve_before + (SteadySeconds() - start) - (shadow_seconds - shadow_before);
