@@ -2,9 +2,9 @@
 // calibration, reconstruction and fitting to complete U3M materials with reports.
 #include <iostream>
 #include <memory>
-#include <sstream>
 
 #include "cli/command.h"
+#include "cli/light_list.h"
 #include "cli/progress_bar.h"
 #include "core/error.h"
 #include "core/logging.h"
@@ -56,8 +56,7 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
       ->check(CLI::IsMember({"clusters", "per-pixel"}));
   sub.add_flag("--no-cast-shadows", args->options.no_cast_shadows,
                "Do not mark cast shadows from the heights (on in every preset; for comparisons)");
-  // One string split here, not a CLI11 vector option: a vector would also swallow the capture
-  // paths that follow it on the command line.
+  // One string, split by SplitLightIds (cli/light_list.h says why).
   sub.add_option("--hold-out-lights", args->hold_out_lights,
                  "Light ids (the manifest's, comma-separated, e.g. L03,L09) left out of reconstruction and fit; "
                  "the report gives the material's re-render error against their photographs");
@@ -127,11 +126,7 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
     if (args->dpi > 0.0) options.dpi = args->dpi;
     if (!args->id.empty()) options.id = args->id;
     if (!args->created.empty()) options.created = args->created;
-    if (!args->hold_out_lights.empty()) {
-      std::stringstream list(args->hold_out_lights);
-      for (std::string id; std::getline(list, id, ',');) options.hold_out_lights.push_back(id);
-      if (args->hold_out_lights.back() == ',') options.hold_out_lights.push_back("");  // "L03," names an empty id
-    }
+    options.hold_out_lights = SplitLightIds(args->hold_out_lights);
     std::string why;
     if (!options.Check(&why)) {
       LogError() << why;

@@ -72,6 +72,14 @@ std::vector<std::size_t> TakeHeldOutFrames(const Manifest& manifest, const std::
   return out;
 }
 
+nlohmann::json HeldOutCheckToJson(const HeldOutCheck& check) {
+  nlohmann::json lights = nlohmann::json::array();
+  for (const HeldOutLightError& e : check.lights) {
+    lights.push_back({{"id", e.light_id}, {"relative_rmse", e.relative_rmse}, {"pixels", e.pixels}});
+  }
+  return {{"relative_rmse", check.relative_rmse}, {"lights", lights}};
+}
+
 HeldOutCheck CheckHeldOutLights(const fitting::FitResult& fit, const Stack& stack, const SideReconstruction& geometry,
                                 std::vector<Observation> held_out, const StageOptions& options) {
   const double start = SteadySeconds();

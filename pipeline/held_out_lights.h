@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "capture/manifest.h"
 #include "core/stack.h"
 #include "fitting/principled_fit.h"
@@ -41,6 +43,10 @@ std::vector<Observation> TakeHeldOutObservations(Stack* stack, const std::vector
 // named lights lit out of it and returns them. Throws as TakeHeldOutObservations does.
 std::vector<std::size_t> TakeHeldOutFrames(const Manifest& manifest, const std::string& side,
                                            const std::vector<std::string>& light_ids, std::vector<std::size_t>* side_frames);
+
+// The check as report.json's and fit.json's "held_out_lights": {"relative_rmse", "lights": [{"id",
+// "relative_rmse", "pixels"}]}, errors as fractions (0.02 = 2 %).
+nlohmann::json HeldOutCheckToJson(const HeldOutCheck& check);
 
 // Renders every held-out observation with `fit` on `geometry` (the reconstruction of `stack`, the
 // fitted observations' stack) and compares (see above). Marks the held-out observations' cast

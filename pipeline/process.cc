@@ -5,22 +5,16 @@
 #include <fstream>
 #include <system_error>
 
-#include "capture/rectification.h"
 #include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
 #include "core/system_stats.h"
-#include "pipeline/alpha_map.h"
 #include "pipeline/height_reliability.h"
 #include "pipeline/held_out_lights.h"
 #include "pipeline/material_writer.h"
-#include "pipeline/relief_registration.h"
+#include "pipeline/side_run.h"
 #include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/stages.h"
-#include "pipeline/view_parallax.h"
-#include "pipeline/tiled_side.h"
-#include "pipeline/tiles.h"
-#include "capture/stack_builder.h"
 #include "u3m/image_io.h"
 #include "u3m/material.h"
 #include "u3m/material_json.h"
@@ -31,11 +25,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The U3M key of each fitted parameter (fitting::FitParameter order).
 constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
-// Observations the render-residual map of the report averages over (spread over the stack).
-constexpr int kResidualObservations = 6;
 
+// The U3M key of each fitted parameter (fitting::FitParameter order).
 constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
 
@@ -278,99 +270,17 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
 
   const MetricGrid& grid = prepared.calibration.grid;
   for (const std::string& side : prepared.sides) {
-
-    // Alpha from the backlight frame of this side, when the capture has one.
-    Image alpha;
-    FrameFilter backlight_filter;
-    backlight_filter.role = FrameRole::kBacklight;
-    backlight_filter.side = side;
-    const auto backlight = prepared.capture.Frames(backlight_filter);
-    if (backlight.empty()) {
-      report.steps.push_back({"alpha " + side, false, "no backlight frame", 0.0});
-    } else {
-      const double start = SteadySeconds();
-      const std::size_t index = backlight.front();
-      const CameraCalibration* camera = prepared.calibration.FindCamera(prepared.capture.frame(index).camera);
-      if (!camera) throw std::logic_error("calibration lacks camera " + prepared.capture.frame(index).camera);
-      const RectificationMap map = BuildRectificationMap(camera->model, grid, prepared.calibration.surface_z_mm);
-      const RectifiedFrame rectified = Rectify(prepared.capture.LoadFrame(index), map);
-      AlphaEstimate estimate = AlphaFromBacklight(rectified.rgb, rectified.flags);
-      alpha = std::move(estimate.alpha);
-      report.steps.push_back({"alpha " + side, true,
-                              alpha.empty() ? estimate.note
-                                            : "holes cover " + std::to_string(100.0 * estimate.hole_fraction) + " %",
-                              SteadySeconds() - start});
-    }
-
-    // The whole side at once when its stack fits the budget, else band by band (tiled_side.h).
-    const std::vector<std::size_t> side_frames = SideSampleFrames(manifest, side);
-    bool flats = false;
-    for (std::size_t index : side_frames) {
-      const FrameSpec& spec = manifest.frames[index];
-      flats = flats || (spec.light && prepared.calibration.FindFlat(spec.camera, *spec.light, side));
-    }
-    // A tilted view: its frames registered on the relief (one band) and the normals taken from the
-    // most vertical view (relief_registration.h). Decided from the cameras, before any stack.
-    StageOptions side_stages = stages;
-    const Stack views = SideViews(prepared, side);
-    const bool tilted_view = NeedsReliefRegistration(views);
-    if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
-    // Heights integrated along the camera's rays (view_parallax.h); not when registered on the relief.
-    SetViewParallax(views, prepared.calibration, tilted_view, &side_stages);
-    // --ps-supersample: photometric stereo on a grid k times finer; the bands are planned so that
-    // each one's fine stack fits the budget (one band when the whole fine stack does).
-    const int k = options.ps_supersample == 0 ? PsSupersampleForCameras(prepared.calibration, views)
-                                              : std::clamp(options.ps_supersample, 1, kMaxPsSupersample);
-    const TilePlan plan =
-        PlanTiles(grid, static_cast<int>(side_frames.size()), flats, options.max_memory_gib * kGiB, k);
-    report.options["ps_supersample_" + side] = k;
-    Stack stack;  // the whole stack (untiled), or the fit's sample (tiled): thumbnails
-    SideReconstruction reconstruction;
-    fitting::FitResult fit;
-    bool fitted_normals = false;  // the written normals are the fit's (AdoptFittedNormals)
-    Image residual;
-    double residual_mean = 0.0;
-    std::optional<HeldOutCheck> held_out_check;
-    if (plan.bands == 1) {
-      stack = BuildSideStack(prepared, side, stages, &report, progress);
-      std::vector<Observation> held_out;
-      if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
-      if (tilted_view) {
-        stack = BuildSideStackOnRelief(prepared, side, stages, alpha, std::move(stack), &report, progress);
-        if (!options.hold_out_lights.empty()) held_out = TakeHeldOutObservations(&stack, options.hold_out_lights);
-      }
-      FineReconstruction fine;
-      reconstruction = ReconstructSideSupersampled(prepared, side, k, &stack, side_stages, alpha, &report, progress, &fine);
-      Image fine_height;
-      fit = FitSideWithFineNormals(stack, reconstruction, std::move(fine), side_stages, &report, progress, &fine_height);
-      const bool near = HasPointLights(stack);
-      fitted_normals = fine_height.empty()
-                           ? AdoptFittedNormals(&fit, stack.grid, near, side_stages, &reconstruction, &report, progress)
-                           : AdoptFineFittedNormals(&fit, std::move(fine_height), &reconstruction, &report);
-      if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());
-      residual = FitResidualMap(fit, stack, reconstruction, kResidualObservations, &residual_mean);
-      if (!held_out.empty()) held_out_check = CheckHeldOutLights(fit, stack, reconstruction, std::move(held_out), stages);
-    } else {
-      TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, plan, alpha, kResidualObservations,
-                                         options.hold_out_lights, &report, progress);
-      held_out_check = std::move(tiled.held_out);
-      if (tilted_view) report.steps.push_back(TiltedViewNormalsStep());  // registered on the relief in bands
-      stack = std::move(tiled.sample);
-      reconstruction = std::move(tiled.reconstruction);
-      fit = std::move(tiled.fit);
-      residual = std::move(tiled.residual);
-      residual_mean = tiled.residual_mean;
-      fitted_normals = tiled.fitted_normals;
-    }
-    if (held_out_check) {
-      char detail[120];
-      std::snprintf(detail, sizeof detail, "%zu light(s) left out of the fit: relative RMSE %.2f %% against their photographs",
-                    held_out_check->lights.size(), 100.0 * held_out_check->relative_rmse);
-      report.steps.push_back({"held-out lights " + side, true, detail, held_out_check->seconds});
-    }
-    report.options["tiles_" + side] = {{"bands", plan.bands}, {"band_rows", plan.band_rows},
-                                       {"fit_sample_step", plan.sample_step},
-                                       {"stack_gib", plan.whole_stack_bytes / kGiB}};
+    // Alpha, reconstruction and fit of the side as side_run.h says.
+    SideRun run = RunSide(prepared, side, stages,
+                          {.max_memory_gib = options.max_memory_gib, .ps_supersample = options.ps_supersample,
+                           .hold_out_lights = options.hold_out_lights},
+                          &report, progress);
+    const Image& alpha = run.alpha;
+    const Stack& stack = run.stack;
+    const SideReconstruction& reconstruction = run.reconstruction;
+    const fitting::FitResult& fit = run.fit;
+    const Image& residual = run.residual;
+    const std::optional<HeldOutCheck>& held_out_check = run.held_out;
 
     // The side's maps for the writer.
     SideMaps maps;
@@ -378,7 +288,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
     maps.base_color = fit.base_color.empty() ? reconstruction.photometric_stereo.albedo : fit.base_color;
     maps.base_color.set_pitch_mm(grid.pitch_mm);
     maps.normal = reconstruction.photometric_stereo.normal;
-    if (fitted_normals) maps.normal_source = "photometric stereo, refined with the fitted model (height integrated from these)";
+    if (run.fitted_normals) maps.normal_source = "photometric stereo, refined with the fitted model (height integrated from these)";
     maps.normal.set_pitch_mm(grid.pitch_mm);
     maps.height_mm = reconstruction.height_mm;
     maps.alpha = alpha;
@@ -410,15 +320,9 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                      {"regularised_pixels", ps.regularised_pixels},
                      {"cast_shadow_share", reconstruction.cast_shadow_share},
                      {"fit_rms_relative_residual", weight > 0 ? rms / weight : 0.0},
-                     {"mean_relative_render_residual", residual_mean},
+                     {"mean_relative_render_residual", run.residual_mean},
                      {"fit_converged", fit.convergence.all_converged}};
-    if (held_out_check) {
-      nlohmann::json lights = nlohmann::json::array();
-      for (const HeldOutLightError& e : held_out_check->lights) {
-        lights.push_back({{"id", e.light_id}, {"relative_rmse", e.relative_rmse}, {"pixels", e.pixels}});
-      }
-      quality[side]["held_out_lights"] = {{"relative_rmse", held_out_check->relative_rmse}, {"lights", lights}};
-    }
+    if (held_out_check) quality[side]["held_out_lights"] = HeldOutCheckToJson(*held_out_check);
 
     // Report thumbnails: a few input observations, every map, confidence and residual.
     const std::size_t n = stack.observations.size();

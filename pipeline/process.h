@@ -50,8 +50,8 @@ struct ProcessOptions {
   // instead of each cluster's own spread (pixel_prior_from_samples off; for comparisons).
   bool one_pixel_prior = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
-  // error against the photographs goes to the report (pipeline/held_out_lights.h). Scans that need
-  // bands (--max-memory) are refused with them.
+  // error against the photographs goes to the report (pipeline/held_out_lights.h), in one band or
+  // in bands (tiled_side.h).
   std::vector<std::string> hold_out_lights;
   // Memory budget of one band's stack, GiB: a side whose whole stack (model in pipeline/tiles.h)
   // needs more is processed in bands of rows (docs/process.md, "Large scans: memory and time").

@@ -3,9 +3,13 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <limits>
 #include <sstream>
 #include <set>
 #include <string>
@@ -48,6 +52,9 @@ RunResult U3mscan(const std::string& args) {
   return run;
 }
 
+// Two commands' maps from the same code on the same input: the same floats.
+constexpr float kSameMapTolerance = 1e-6f;
+
 class Cli : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -64,6 +71,29 @@ class Cli : public ::testing::Test {
   nlohmann::json ReadJson(const std::string& name) const {
     std::ifstream in(dir_ / name);
     return nlohmann::json::parse(in);
+  }
+  // `u3mscan args`, expected to exit with 0 (a failure names the command and gives its output).
+  static RunResult Succeeds(const std::string& args) {
+    RunResult run = U3mscan(args);
+    EXPECT_EQ(run.exit_code, 0) << "u3mscan " << args << "\n" << run.output;
+    return run;
+  }
+  // A plain weave on the oblique rig (a tilted camera) with its camera at twice the maps' 300 dpi,
+  // rendered into dir_/plain; returns its capture folder, quoted for the command line.
+  std::string PlainObliqueAtTwiceTheMapsDpi() const {
+    Succeeds("synth --scene plain --rig oblique --size 128x128 --dpi 600 --no-calibration --format tiff -o " +
+             Path("plain"));
+    return Path("plain/capture");
+  }
+  // The largest |a - b| over every sample of two float maps (relative paths under dir_); infinity
+  // when their sizes differ.
+  float LargestDifference(const fs::path& a_path, const fs::path& b_path) const {
+    const Image a = ReadImageFile(dir_ / a_path, PixelEncoding::kLinear), b = ReadImageFile(dir_ / b_path, PixelEncoding::kLinear);
+    EXPECT_EQ(a.data().size(), b.data().size()) << a_path << " and " << b_path;
+    if (a.data().size() != b.data().size()) return std::numeric_limits<float>::infinity();
+    float largest = 0.0f;
+    for (std::size_t i = 0; i < a.data().size(); ++i) largest = std::max(largest, std::abs(a.data()[i] - b.data()[i]));
+    return largest;
   }
   fs::path dir_;
 };
@@ -231,6 +261,44 @@ TEST_F(Cli, FitAndProcessTakeOnePixelPriorWhenAsked) {
   };
   EXPECT_EQ(process_prior("process_one", " --one-pixel-prior"), false);
   EXPECT_EQ(process_prior("process_own", ""), true);
+}
+
+// `fit` runs what `process` runs before its fit (pipeline/side_run.h): on a tilted camera at twice
+// the maps' dpi, the relief registration and the finer grid's facets, so both write the same
+// parameter maps; in bands past --max-memory; with the held-out lights' error in fit.json. Before
+// side_run.h, `fit` solved one normal a map pixel on the plane and its maps differed.
+TEST_F(Cli, FitRunsWhatProcessRunsBeforeItsFit) {
+  const std::string capture = PlainObliqueAtTwiceTheMapsDpi();
+  const RunResult fit = Succeeds("fit " + capture + " -o " + Path("fit") + " --preset fast --dpi 300");
+  Succeeds("process " + capture + " -o " + Path("process") + " --preset fast --dpi 300 --debug-maps");
+  ASSERT_FALSE(HasFailure());
+  const nlohmann::json fit_json = ReadJson("fit/fit.json");
+  EXPECT_EQ(fit_json["run"]["ps_supersample"], 2) << fit_json["run"].dump();
+  EXPECT_EQ(fit_json["run"]["bands"], 1) << fit_json["run"].dump();
+  EXPECT_NE(fit.output.find("relief registration"), std::string::npos) << fit.output;
+  EXPECT_NE(fit.output.find("finer grid's facets"), std::string::npos) << fit.output;
+  int compared = 0;
+  for (const char* map : {"base_color", "roughness", "specular", "sheen", "sheen_tint"}) {
+    const fs::path from_fit = fs::path("fit") / "maps" / (std::string(map) + ".exr");
+    const fs::path from_process = fs::path("process") / "maps" / (std::string(map) + ".exr");
+    ASSERT_EQ(fs::exists(dir_ / from_fit), fs::exists(dir_ / from_process)) << map;  // measured by both or neither
+    if (!fs::exists(dir_ / from_fit)) continue;
+    EXPECT_LE(LargestDifference(from_fit, from_process), kSameMapTolerance) << map;
+    ++compared;
+  }
+  EXPECT_GE(compared, 3) << "the oblique rig measures the base colour and roughness, specular and sheen";
+  // A budget below the stack's: bands; the held-out lights' error in fit.json.
+  const double stack_gib = ReadJson("process/report.json")["options"]["tiles_front"]["stack_gib"].get<double>();
+  const RunResult banded = Succeeds("fit " + capture + " -o " + Path("banded") + " --preset fast --dpi 300 --max-memory " +
+                                    std::to_string(stack_gib / 2.5) + " --hold-out-lights L03");
+  ASSERT_FALSE(HasFailure());
+  const nlohmann::json banded_json = ReadJson("banded/fit.json");
+  EXPECT_GT(banded_json["run"]["bands"].get<int>(), 1) << banded_json["run"].dump();
+  ASSERT_TRUE(banded_json.contains("held_out_lights")) << banded.output;
+  EXPECT_EQ(banded_json["held_out_lights"]["lights"].size(), 1u);
+  EXPECT_EQ(banded_json["held_out_lights"]["lights"][0]["id"], "L03");
+  const double error = banded_json["held_out_lights"]["relative_rmse"].get<double>();
+  EXPECT_TRUE(error > 0.0 && error < 1.0) << error;
 }
 
 TEST_F(Cli, SynthBallAndBenchDiligentRefuseBadArgumentsAndWriteNothing) {
