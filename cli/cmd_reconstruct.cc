@@ -1,5 +1,7 @@
 // `u3mscan reconstruct CAPTURE -o DIR`: calibration, rectification, photometric stereo and
-// integration of one side; writes the maps and prints each step's run time.
+// integration of one side, as `process` runs them before its fit (the backlight's holes, a tilted
+// view's normals from the most vertical view, the finer grid); writes the maps and prints each
+// step's run time.
 #include <iostream>
 #include <memory>
 
@@ -7,6 +9,7 @@
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
 #include "pipeline/relief_registration.h"
+#include "pipeline/side_run.h"
 #include "pipeline/stages.h"
 #include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/tiles.h"
@@ -53,7 +56,10 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
                "Also turn the normal map by the tilt --level removes (as `process --level-normals`)");
   sub.footer(
       "Writes DIR/maps/normal.exr (float, unit, world frame: x right, y up, z toward the camera),\n"
-      "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).");
+      "DIR/maps/albedo.exr (linear RGB), DIR/maps/height.exr (mm) and DIR/maps/confidence.exr (0..1).\n"
+      "As `process` before its fit: holes seen in a backlight frame are masked out of the height, and\n"
+      "with a tilted camera the normals come from the most vertical one alone (docs/process.md,\n"
+      "Relief registration). `process` then refines the normals with the fitted model.");
   return std::function<int()>([args] {
     StageOptions stages = OptionsForPreset(Preset::kBalanced);
     stages.photometric_stereo.solver = reconstruction::ParsePsSolver(args->solver);
@@ -64,9 +70,18 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     RunReport report;
     ProgressBar bar(false);
     PreparedCapture prepared = PrepareCapture(args->capture, stages, &report, bar.Callback());
+    // Holes from the backlight frame, masked out of the integration, as `process` masks them.
+    const Image alpha = SideAlpha(prepared, args->side, &report);
     Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
-    // Heights integrated along the camera's rays (pipeline/view_parallax.h); the frames lie on the plane.
-    SetViewParallax(SideViews(prepared, args->side), prepared.calibration, /*rectified_on_relief=*/false, &stages);
+    // A tilted view: the normals from the most vertical view alone, as `process` takes them
+    // (relief_registration.h; with every view on the face's plane the tilted one's shifted relief
+    // and lobes integrate into a ramp). That view moves by hundredths of a pixel on the relief, so
+    // its frames stay on the plane here. Otherwise the heights are integrated along the camera's
+    // rays (pipeline/view_parallax.h).
+    const Stack views = SideViews(prepared, args->side);
+    const bool tilted_view = NeedsReliefRegistration(views);
+    if (tilted_view) UseTheMostVerticalViewForNormals(views, &stages);
+    SetViewParallax(views, prepared.calibration, tilted_view, &stages);
     bool flats = false;
     for (const Observation& o : stack.observations) flats = flats || !o.irradiance.empty();
     std::string lowered;
@@ -75,7 +90,7 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
                                       &lowered);
     if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid", false, lowered, 0.0});
     SideReconstruction result =
-        ReconstructSideSupersampled(prepared, args->side, k, &stack, stages, Image(), &report, bar.Callback());
+        ReconstructSideSupersampled(prepared, args->side, k, &stack, stages, alpha, &report, bar.Callback());
     report.steps.push_back(LevelSideMaps(reconstruction::ParseLevelling(args->level), args->side, result.valid,
                                          &result.height_mm, args->level_normals ? &result.photometric_stereo.normal : nullptr));
     bar.Finish();
