@@ -60,9 +60,9 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
       "Runs calibration and reconstruction first, as `process` does (a tilted camera's relief\n"
       "registration, a finer grid where the camera resolves one, bands past --max-memory). Writes\n"
       "DIR/maps/<parameter>.exr for every measured parameter (roughness, specular, ...; base_color\n"
-      "linear RGB) and DIR/fit.json. Parameters the\n"
-      "capture does not constrain get no map: fit.json says why. A measured parameter the fit's own\n"
-      "evidence does not trust is marked UNRELIABLE, with the reason (fit.json: \"reliable\": false).");
+      "linear RGB) and DIR/fit.json. Parameters the capture does not constrain get no map: fit.json\n"
+      "says why. A measured parameter the fit's own evidence does not trust is marked UNRELIABLE,\n"
+      "with the reason (fit.json: \"reliable\": false).");
   return std::function<int()>([args] {
     StageOptions stages = OptionsForPreset(ParsePreset(args->preset));
     if (args->dpi > 0.0) stages.calibration.dpi = args->dpi;

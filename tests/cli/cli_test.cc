@@ -299,6 +299,11 @@ TEST_F(Cli, FitRunsWhatProcessRunsBeforeItsFit) {
   EXPECT_EQ(banded_json["held_out_lights"]["lights"][0]["id"], "L03");
   const double error = banded_json["held_out_lights"]["relative_rmse"].get<double>();
   EXPECT_TRUE(error > 0.0 && error < 1.0) << error;
+  // A light the capture does not have: refused with the option named, exit 2, nothing written.
+  const RunResult unknown = U3mscan("fit " + capture + " -o " + Path("unknown") + " --preset fast --dpi 300 --hold-out-lights L99");
+  EXPECT_EQ(unknown.exit_code, 2) << unknown.output;
+  EXPECT_NE(unknown.output.find("--hold-out-lights"), std::string::npos) << unknown.output;
+  EXPECT_FALSE(fs::exists(dir_ / "unknown"));
 }
 
 // `reconstruct` on a capture with a tilted camera takes the normals from the most vertical view
