@@ -69,7 +69,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     if (!args->fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(args->fit_mode);
     stages.follow_fibres = args->follow_fibres;
     if (args->one_pixel_prior) stages.fit.pixel_prior_from_samples = false;
-    stages.capture.decode_cache_bytes = static_cast<std::size_t>(args->run.max_memory_gib * 1024.0 * 1024.0 * 1024.0);
+    SetDecodeCacheBudget(args->run.max_memory_gib, &stages);
     SideRunOptions run_options = args->run;
     run_options.hold_out_lights = SplitLightIds(args->hold_out_lights);
     RunReport report;

@@ -8,12 +8,10 @@
 #include "cli/command.h"
 #include "cli/progress_bar.h"
 #include "cli/stage_outputs.h"
-#include "pipeline/relief_registration.h"
 #include "pipeline/side_run.h"
 #include "pipeline/stages.h"
 #include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/tiles.h"
-#include "pipeline/view_parallax.h"
 
 namespace u3mscan::cli {
 namespace {
@@ -74,19 +72,15 @@ U3MSCAN_REGISTER_COMMAND(kReconstructCommand, "reconstruct", "Capture -> normal,
     const Image alpha = SideAlpha(prepared, args->side, &report);
     Stack stack = BuildSideStack(prepared, args->side, stages, &report, bar.Callback());
     // A tilted view: the normals from the most vertical view alone, as `process` takes them
-    // (relief_registration.h; with every view on the face's plane the tilted one's shifted relief
-    // and lobes integrate into a ramp). That view moves by hundredths of a pixel on the relief, so
-    // its frames stay on the plane here. Otherwise the heights are integrated along the camera's
-    // rays (pipeline/view_parallax.h).
-    const Stack views = SideViews(prepared, args->side);
-    const bool tilted_view = NeedsReliefRegistration(views);
-    if (tilted_view) UseTheMostVerticalViewForNormals(views, &stages);
-    SetViewParallax(views, prepared.calibration, tilted_view, &stages);
+    // (StagesForSide; with every view on the face's plane the tilted one's shifted relief and lobes
+    // integrate into a ramp). That view moves by hundredths of a pixel on the relief, so its frames
+    // stay on the plane here. Otherwise the heights are integrated along the camera's rays.
+    stages = StagesForSide(prepared, args->side, stages).options;
     bool flats = false;
     for (const Observation& o : stack.observations) flats = flats || !o.irradiance.empty();
     std::string lowered;
     const int k = ChoosePsSupersample(args->ps_supersample, prepared.calibration, stack,
-                                      static_cast<int>(stack.observations.size()), flats, kDefaultStackBudgetGiB * 1024.0 * 1024.0 * 1024.0,
+                                      static_cast<int>(stack.observations.size()), flats, kDefaultStackBudgetGiB * kBytesPerGiB,
                                       &lowered);
     if (!lowered.empty()) report.steps.push_back({"photometric stereo on a finer grid", false, lowered, 0.0});
     SideReconstruction result =

@@ -25,8 +25,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
-
 // The U3M key of each fitted parameter (fitting::FitParameter order).
 constexpr const char* kU3mKeyOfFitParameter[fitting::kFitParameterCount] = {
     "roughness", "specular_value", "specular_tint", "sheen_value", "sheen_tint", "anisotropy_value", "metalness"};
@@ -204,9 +202,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   report.preset = PresetName(options.preset);
 
   StageOptions stages = OptionsForPreset(options.preset);
-  // The decode cache (RAW, PNG, JPEG, compressed TIFF frames) gets the same budget as one band's
-  // stack (both are bounded by it).
-  stages.capture.decode_cache_bytes = static_cast<std::size_t>(options.max_memory_gib * kGiB);
+  SetDecodeCacheBudget(options.max_memory_gib, &stages);
   if (options.dpi) stages.calibration.dpi = options.dpi;
   if (!options.solver.empty()) stages.photometric_stereo.solver = reconstruction::ParsePsSolver(options.solver);
   if (!options.integrator.empty()) {

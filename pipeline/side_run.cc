@@ -14,11 +14,18 @@
 #include "pipeline/view_parallax.h"
 
 namespace u3mscan {
-namespace {
 
-constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
+void SetDecodeCacheBudget(double max_memory_gib, StageOptions* stages) {
+  stages->capture.decode_cache_bytes = static_cast<std::size_t>(max_memory_gib * kBytesPerGiB);
+}
 
-}  // namespace
+SideStages StagesForSide(const PreparedCapture& prepared, const std::string& side, const StageOptions& stages) {
+  SideStages out{SideViews(prepared, side), false, stages};
+  out.tilted_view = NeedsReliefRegistration(out.views);
+  if (out.tilted_view) UseTheMostVerticalViewForNormals(out.views, &out.options);
+  SetViewParallax(out.views, prepared.calibration, /*rectified_on_relief=*/out.tilted_view, &out.options);
+  return out;
+}
 
 Image SideAlpha(const PreparedCapture& prepared, const std::string& side, RunReport* report) {
   FrameFilter backlight_filter;
@@ -59,20 +66,18 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
     flats = flats || (spec.light && prepared.calibration.FindFlat(spec.camera, *spec.light, side));
   }
   // A tilted view: its frames registered on the relief (one band) and the normals taken from the
-  // most vertical view (relief_registration.h). Decided from the cameras, before any stack.
-  StageOptions side_stages = stages;
-  const Stack views = SideViews(prepared, side);
-  const bool tilted_view = NeedsReliefRegistration(views);
-  if (tilted_view) UseTheMostVerticalViewForNormals(views, &side_stages);
-  // Heights integrated along the camera's rays (view_parallax.h); not when registered on the relief.
-  SetViewParallax(views, prepared.calibration, tilted_view, &side_stages);
+  // most vertical view; otherwise the heights along the camera's rays (StagesForSide).
+  const SideStages decided = StagesForSide(prepared, side, stages);
+  const StageOptions& side_stages = decided.options;
+  const Stack& views = decided.views;
+  const bool tilted_view = decided.tilted_view;
   // --ps-supersample: photometric stereo on a grid k times finer; the bands are planned so that
   // each one's fine stack fits the budget (one band when the whole fine stack does).
   const int k = options.ps_supersample == 0 ? PsSupersampleForCameras(prepared.calibration, views)
                                             : std::clamp(options.ps_supersample, 1, kMaxPsSupersample);
   run.ps_supersample = k;
   run.plan = PlanTiles(prepared.calibration.grid, static_cast<int>(side_frames.size()), flats,
-                       options.max_memory_gib * kGiB, k);
+                       options.max_memory_gib * kBytesPerGiB, k);
   report->options["ps_supersample_" + side] = k;
   if (run.plan.bands == 1) {
     Stack& stack = run.stack;
@@ -115,7 +120,7 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
   }
   report->options["tiles_" + side] = {{"bands", run.plan.bands}, {"band_rows", run.plan.band_rows},
                                       {"fit_sample_step", run.plan.sample_step},
-                                      {"stack_gib", run.plan.whole_stack_bytes / kGiB}};
+                                      {"stack_gib", run.plan.whole_stack_bytes / kBytesPerGiB}};
   return run;
 }
 

@@ -45,6 +45,20 @@ struct SideRun {
   std::optional<HeldOutCheck> held_out;  // with hold_out_lights
 };
 
+// The capture's cache of frames kept decoded (RAW, PNG, JPEG, compressed TIFF) gets the same budget
+// as one band's stack: --max-memory bounds both. Set before PrepareCapture, which opens the capture.
+void SetDecodeCacheBudget(double max_memory_gib, StageOptions* stages);
+
+// A side's stage options, decided from its cameras before any stack is built: with a tilted view
+// the normals from the most vertical view (relief_registration.h), and the heights integrated along
+// the camera's rays unless the frames are registered on the relief (view_parallax.h).
+struct SideStages {
+  Stack views;               // SideViews: the grid and the side's views, no observations
+  bool tilted_view = false;  // NeedsReliefRegistration(views)
+  StageOptions options;      // `stages` with the two settings above
+};
+SideStages StagesForSide(const PreparedCapture& prepared, const std::string& side, const StageOptions& stages);
+
 // The side's alpha from its backlight frame (pipeline/alpha_map.h), rectified on the face's plane;
 // empty when the capture has no backlight frame for the side or the frame shows no holes. Adds the
 // step "alpha SIDE" to `report`.

@@ -161,18 +161,29 @@ fitting::FitResult BandFit(const fitting::FitResult& fit, int row0, int rows) {
   return band;
 }
 
-// The surface the fit and the held-out check see on a band: the reconstruction's rows of it, and
-// the rows of the fibres' turns when there are any (`turns`, on the whole grid).
-// `facets` (may be empty): the whole side's normals `fine_factor` times finer, which the fit takes
-// as each map pixel's facets (SideReconstruction::fine_normals); the band's k rows a map row.
+// A band's rows [row0, row0 + rows) of the side's reconstruction: normals, albedo and heights, and
+// with `facets` (may be empty: the whole side's normals `fine_factor` times finer, which the fit
+// takes as each map pixel's facets, SideReconstruction::fine_normals) the band's k rows a map row.
+SideReconstruction BandSide(const SideReconstruction& geometry, int row0, int rows, const Image& facets = Image(),
+                            int fine_factor = 1) {
+  SideReconstruction band;
+  band.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);
+  band.photometric_stereo.albedo = CropRows(geometry.photometric_stereo.albedo, row0, rows);
+  band.height_mm = CropRows(geometry.height_mm, row0, rows);
+  if (!facets.empty()) {
+    band.fine_normals = CropRows(facets, row0 * fine_factor, rows * fine_factor);
+    band.fine_factor = fine_factor;
+  }
+  return band;
+}
+
+// The surface the fit and the held-out check see on a band (BandSide), with the rows of the
+// fibres' turns when there are any (`turns`, on the whole grid).
 fitting::SurfaceGeometry BandSurface(const SideReconstruction& geometry, int row0, int rows, const Image& turns = Image(),
                                      const Image& facets = Image(), int fine_factor = 1) {
-  return {CropRows(geometry.photometric_stereo.normal, row0, rows),
-          CropRows(geometry.photometric_stereo.albedo, row0, rows),
-          CropRows(geometry.height_mm, row0, rows),
-          turns.empty() ? Image() : CropRows(turns, row0, rows),
-          facets.empty() ? Image() : CropRows(facets, row0 * fine_factor, rows * fine_factor),
-          facets.empty() ? 1 : fine_factor};
+  fitting::SurfaceGeometry surface = SideSurface(BandSide(geometry, row0, rows, facets, fine_factor));
+  if (!turns.empty()) surface.fibre_turn_deg = CropRows(turns, row0, rows);
+  return surface;
 }
 
 }  // namespace
@@ -542,23 +553,21 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
           shadow_counts = counts_before_sweep;
           if (fine_near_rounds) fine_round_height = std::move(fine_kept_height);
         });
-    // Each fine height's share of the surface (empty when the parallax is off), from the last
-    // sweep's fine normals, for the maps' heights below.
-    const Image fine_height_weights =
-        fine_near_rounds ? SurfaceAreaWeights(fine_last_normal, options.integration.parallax) : Image();
+    // The kept round's fine heights: the fit's fine bands are solved and marked at them, and the
+    // maps' heights are their block means, each weighted by its share of the surface (from the last
+    // sweep's fine normals; no weights when the parallax is off), as one band's are
+    // (AveragePhotometricStereoOntoMaps of its fine side): the rounds' heights, integrated on the
+    // maps' grid from the averaged normals, miss the steps between a map pixel's facets.
+    if (ps.near_iterations > 0 && !fine_round_height.empty()) {
+      fine_near_height = std::move(fine_round_height);
+      ps.height_mm = BlockWeightedMean(fine_near_height, SurfaceAreaWeights(fine_last_normal, options.integration.parallax),
+                                       fine_factor, grid.pitch_mm);
+    }
     // The last sweep's fine normals are the kept round's unless that round was rejected: the
     // facets, without solving the fine bands again.
     if (fit_facets && fine_near_rounds && !last_round_rejected) facet_normals = std::move(fine_last_normal);
     fine_last_normal = Image();
     fine_last_confidence = Image();
-    // The kept round's fine heights: the fit's fine bands are solved and marked at them, and the
-    // maps' heights are their block means, as one band's are (AveragePhotometricStereoOntoMaps of
-    // its fine side): the rounds' heights, integrated on the maps' grid from the averaged normals,
-    // miss the steps between a map pixel's facets.
-    if (ps.near_iterations > 0 && !fine_round_height.empty()) {
-      fine_near_height = std::move(fine_round_height);
-      ps.height_mm = BlockWeightedMean(fine_near_height, fine_height_weights, fine_factor, grid.pitch_mm);
-    }
     // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
     // photometric stereo's.
     solve_seconds = solve_before + (SteadySeconds() - start) - (shadow_seconds - shadow_before);
@@ -860,18 +869,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     Stack band = bands.Build(residual_frames, b);
     if (!shadow_height.empty()) mark(shadow_height, grid, &band);
     const int row0 = bands.Row0(b), rows = bands.Rows(b);
-    SideReconstruction band_geometry;
-    band_geometry.photometric_stereo.normal = CropRows(geometry.photometric_stereo.normal, row0, rows);
-    band_geometry.photometric_stereo.albedo = CropRows(geometry.photometric_stereo.albedo, row0, rows);
-    band_geometry.height_mm = CropRows(geometry.height_mm, row0, rows);
-    if (fit_facets) {
-      band_geometry.fine_normals = CropRows(facet_normals, row0 * fine_factor, rows * fine_factor);
-      band_geometry.fine_factor = fine_factor;
-    }
     double mean = 0.0;
     std::size_t pixels = 0;
-    PasteRows(FitResidualMap(BandFit(out.fit, row0, rows), band, band_geometry, used, &mean, &pixels), row0,
-              &out.residual);
+    PasteRows(FitResidualMap(BandFit(out.fit, row0, rows), band, BandSide(geometry, row0, rows, facet_normals, fine_factor),
+                             used, &mean, &pixels),
+              row0, &out.residual);
     residual_sum += mean * static_cast<double>(pixels);
     residual_pixels += pixels;
   }

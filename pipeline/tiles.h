@@ -21,6 +21,7 @@ inline constexpr double kWorkingBytesPerPixel = 128.0;
 // cut the same way (and gives the same material) everywhere. 4 GiB keeps a 36 MP, 32-light scan in
 // three bands with everything else (~3 GiB of full-size maps) well inside 24 GiB.
 inline constexpr double kDefaultStackBudgetGiB = 4.0;
+inline constexpr double kBytesPerGiB = 1024.0 * 1024.0 * 1024.0;
 // The fit's sample (every k-th row and column) gets this share of the budget...
 inline constexpr double kSampleShareOfBudget = 0.25;
 // ...but keeps at least this many pixels (k is lowered, down to 1, until it does): k-means takes up
