@@ -81,6 +81,10 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
                "With a tilted camera and --ps-supersample: fit the photographs with each map pixel's one normal, not "
                "as the mixture of the pixel's finer normals as each camera sees them (for comparisons; docs/fitting.md, "
                "Facets of the finer grid)");
+  sub.add_flag("--no-top-view-refinement", args->options.no_top_view_refinement,
+               "With a tilted camera and --ps-supersample: write photometric stereo's normals of the top view, not "
+               "those refined against its photographs with the fitted lobes (for comparisons; docs/reconstruction.md, "
+               "Refining a tilted capture's normals against the top view)");
   sub.add_flag("--follow-fibres", args->options.follow_fibres,
                "Turn the anisotropic stretch per pixel along the fibres the normals show (a lace's cord round its "
                "motif, a satin's floats), each cluster's rotation fitted on top; the rotation is then a texture "

@@ -61,6 +61,12 @@ struct StageOptions {
   // SideReconstruction::fine_normals), not with the pixel's one normal. Off only for comparisons
   // (`process --one-normal-per-pixel`).
   bool fit_facets = true;
+  // With a tilted view and photometric stereo on a finer grid: once the clusters are fitted, each
+  // fine pixel's normal is refined against the top view's photographs with its cluster's lobes and
+  // the written normals are their average, the height taking its detail from them
+  // (pipeline/top_view_normals.h). Off only for comparisons (`process --no-top-view-refinement`):
+  // the normals are then photometric stereo's of the top view.
+  bool refine_top_view_normals = true;
   // The fit's shading frame turned per pixel along the fibres that the normals' relief shows
   // (pipeline/fibre_direction.h, fitting::SurfaceGeometry::fibre_turn_deg), each cluster's
   // anisotropy rotation fitted on top (`process --follow-fibres`; in bands too, pipeline/tiled_side.cc).

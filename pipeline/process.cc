@@ -215,6 +215,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   stages.base_colour_from_fine_grid = !options.fit_on_maps_grid;
   stages.place_fine_pixels_on_plan = !options.no_plan_placement;
   stages.fit_facets = !options.one_normal_per_pixel;
+  stages.refine_top_view_normals = !options.no_top_view_refinement;
   stages.follow_fibres = stages.follow_fibres || options.follow_fibres;
   if (options.one_pixel_prior) stages.fit.pixel_prior_from_samples = false;
   report.options = {{"cast_shadows", stages.mark_cast_shadows}, {"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
@@ -230,6 +231,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"base_colour_from_fine_grid", stages.base_colour_from_fine_grid},
                     {"plan_placement", stages.place_fine_pixels_on_plan},
                     {"fit_facets", stages.fit_facets},
+                    {"top_view_refinement", stages.refine_top_view_normals},
                     {"follow_fibres", stages.follow_fibres},
                     {"pixel_prior_from_samples", stages.fit.pixel_prior_from_samples},
                     {"hold_out_lights", options.hold_out_lights}};

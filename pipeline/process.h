@@ -43,6 +43,10 @@ struct ProcessOptions {
   // With a tilted view and --ps-supersample: fit the photographs with each map pixel's one normal,
   // not as the mixture of its fine normals (StageOptions::fit_facets; for comparisons).
   bool one_normal_per_pixel = false;
+  // With a tilted view and --ps-supersample: write photometric stereo's normals of the top view,
+  // not those refined against it with the fitted lobes (StageOptions::refine_top_view_normals;
+  // for comparisons).
+  bool no_top_view_refinement = false;
   // Turn the fit's shading frame per pixel along the fibres the normals show
   // (StageOptions::follow_fibres).
   bool follow_fibres = false;

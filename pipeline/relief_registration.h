@@ -59,10 +59,12 @@ double MarkHiddenFromTiltedViews(const Image& surface_z_mm, const MetricGrid& he
 // footprint is 1/cos(tilt) times longer along its tilt and its shading holds the view-dependent
 // lobes; with every view in photometric stereo and in the refinement the normals leaned and
 // integrated into a ramp (docs/process.md, "Relief registration": velvet height 11 -> 2.4 %,
-// plain 145 -> 8 % of the range).
+// plain 145 -> 8 % of the range). With a finer grid the normals are refined afterwards against
+// that view alone (top_view_normals.h).
 void UseTheMostVerticalViewForNormals(const Stack& stack, StageOptions* options);
 
-// The report's step for the fitted normals a capture with a tilted view does not use.
+// The report's step for the fitted normals a capture with a tilted view does not use (no finer
+// grid, or --no-top-view-refinement: top_view_normals.h).
 StepRecord TiltedViewNormalsStep();
 
 // The grid and the views (no observations) of a side's stack, in the order BuildStack gives them

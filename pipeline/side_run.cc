@@ -11,6 +11,7 @@
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
 #include "pipeline/tiled_side.h"
+#include "pipeline/top_view_normals.h"
 #include "pipeline/view_parallax.h"
 
 namespace u3mscan {
@@ -91,20 +92,25 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
     FineReconstruction fine;
     run.reconstruction = ReconstructSideSupersampled(prepared, side, k, &stack, side_stages, alpha, report, progress, &fine);
     Image fine_height;
-    run.fit = FitSideWithFineNormals(stack, run.reconstruction, std::move(fine), side_stages, report, progress, &fine_height);
+    run.fit = RefinesTopViewNormals(side_stages, k)
+                  ? FitSideRefiningTopViewNormals(stack, run.reconstruction, std::move(fine), side_stages, report,
+                                                  progress, &fine_height)
+                  : FitSideWithFineNormals(stack, run.reconstruction, std::move(fine), side_stages, report, progress,
+                                           &fine_height);
     const bool near = HasPointLights(stack);
     run.fitted_normals =
         fine_height.empty()
             ? AdoptFittedNormals(&run.fit, stack.grid, near, side_stages, &run.reconstruction, report, progress)
             : AdoptFineFittedNormals(&run.fit, std::move(fine_height), &run.reconstruction, report);
-    if (tilted_view) report->steps.push_back(TiltedViewNormalsStep());
+    if (tilted_view && !run.fitted_normals) report->steps.push_back(TiltedViewNormalsStep());
     run.residual = FitResidualMap(run.fit, stack, run.reconstruction, kResidualObservations, &run.residual_mean);
     if (!held_out.empty()) run.held_out = CheckHeldOutLights(run.fit, stack, run.reconstruction, std::move(held_out), stages);
   } else {
     TiledSide tiled = ProcessSideTiled(prepared, side, side_stages, run.plan, alpha, kResidualObservations,
                                        options.hold_out_lights, report, progress);
     run.held_out = std::move(tiled.held_out);
-    if (tilted_view) report->steps.push_back(TiltedViewNormalsStep());  // registered on the relief in bands
+    // Registered on the relief in bands.
+    if (tilted_view && !tiled.fitted_normals) report->steps.push_back(TiltedViewNormalsStep());
     run.stack = std::move(tiled.sample);
     run.reconstruction = std::move(tiled.reconstruction);
     run.fit = std::move(tiled.fit);

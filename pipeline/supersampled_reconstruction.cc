@@ -15,6 +15,7 @@
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/tiles.h"
+#include "pipeline/top_view_normals.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 
@@ -166,7 +167,7 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
     out.fine_normals = f.normal;
     out.fine_factor = k;
   }
-  if (keep_fine && every_observation) {
+  if (keep_fine && (every_observation || RefinesTopViewNormals(options, k))) {
     keep_fine->k = k;
     keep_fine->stack = std::move(fine);
     keep_fine->side = std::move(fine_side);
@@ -177,7 +178,8 @@ SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, 
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
                                   const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress,
-                                  const PlanPlacement& placement, Image* maps_normals) {
+                                  const PlanPlacement& placement, Image* maps_normals,
+                                  const Image* long_wavelengths_mm) {
   // AdoptFittedNormals' integrator (also for near lights), on each grid.
   reconstruction::IntegrationOptions integration = near ? options.photometric_stereo.integration : options.integration;
   integration.pitch_mm = maps_pitch_mm / k;
@@ -188,10 +190,12 @@ Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, c
   integration.pitch_mm = maps_pitch_mm;
   // Placed on the plan, the average's slopes are the surface's along the grid: no parallax.
   if (placement.enabled()) integration.parallax.enabled = false;
-  const Image maps_height = reconstruction::IntegrateNormals(average, maps_valid, integration, progress).height_mm;
+  Image maps_height;
+  if (!long_wavelengths_mm) maps_height = reconstruction::IntegrateNormals(average, maps_valid, integration, progress).height_mm;
   if (maps_normals) *maps_normals = std::move(average);
   // Each fine height is the height of the point seen there: weighted by its share of the surface.
-  return HeightFromFineAndMapsGrids(fine_height, maps_height, k, fine_weights, placement);
+  return HeightFromFineAndMapsGrids(fine_height, long_wavelengths_mm ? *long_wavelengths_mm : maps_height, k,
+                                    fine_weights, placement);
 }
 
 fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstruction& geometry, FineReconstruction fine,

@@ -83,12 +83,13 @@ int ChoosePsSupersample(int requested, const CalibrationResult& calibration, con
 // What the fit needs of the fine grid to refine the normals there (FitSideWithFineNormals).
 struct FineReconstruction {
   int k = 1;                // 1: nothing below is set
-  Stack stack;              // the fine stack: the same observations in the same order as the maps'
+  Stack stack;              // the fine stack: the maps' observations in their order (a tilted view: its top view's)
   SideReconstruction side;  // photometric stereo and heights on the fine grid
 };
 
 // `keep_fine` (not null, k > 1, and the fine stack holds every observation of `stack`, i.e. no
-// restriction to one view): the fine stack and reconstruction are moved there for the fit.
+// restriction to one view, or it holds the one view's and RefinesTopViewNormals: top_view_normals.h):
+// the fine stack and reconstruction are moved there for the fit.
 SideReconstruction ReconstructSideSupersampled(const PreparedCapture& prepared, const std::string& side, int k,
                                                Stack* stack, const StageOptions& options, const Image& alpha,
                                                RunReport* report, const ProgressCallback& progress = {},
@@ -129,12 +130,15 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
 // With `placement` on (plan_placement.h), both the average and the fine heights' block means put
 // each fine pixel where its surface point lies in plan, and the average, being on the plan, is
 // integrated without the view's parallax. `maps_normals` (not null) gets that average, the normal
-// map the caller writes, so that it is not made twice. FitSideWithFineNormals' height, and the
-// banded path's.
+// map the caller writes, so that it is not made twice. `long_wavelengths_mm` (not null: heights on
+// the maps' grid) replaces the average's integration for the long wavelengths (a tilted capture's
+// top-view refinement keeps photometric stereo's there, top_view_normals.h). FitSideWithFineNormals'
+// height, and the banded path's.
 Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, const Image& fine_weights,
                                   const Image& maps_valid, int k, double maps_pitch_mm, bool near,
                                   const StageOptions& options, const ProgressCallback& progress = {},
-                                  const PlanPlacement& placement = PlanPlacement(), Image* maps_normals = nullptr);
+                                  const PlanPlacement& placement = PlanPlacement(), Image* maps_normals = nullptr,
+                                  const Image* long_wavelengths_mm = nullptr);
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
 // the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the

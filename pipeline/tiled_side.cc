@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
+#include <string>
 
 #include "capture/stack_builder.h"
 #include "pipeline/band_shadow_marks.h"
@@ -14,6 +16,7 @@
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
 #include "pipeline/supersampled_reconstruction.h"
+#include "pipeline/top_view_normals.h"
 #include "reconstruction/cast_shadows.h"
 #include "reconstruction/normal_integration.h"
 #include "reconstruction/photometric_stereo.h"
@@ -671,9 +674,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // marks'. 4 B a fine pixel each, made when a fine pass below needs them (the facets' solve needs
   // the last two, not the surface's).
   const MetricGrid& fine_grid = fine_calibration.grid;
+  // A tilted view: the normals refined on the fine bands against its top view alone, once the
+  // clusters are fitted (top_view_normals.h); the bands' other views are left out of that pass.
+  const bool top_view_fit = RefinesTopViewNormals(options, fine_factor);
+  const std::string top_camera =
+      top_view_fit ? out.sample.views.at(static_cast<std::size_t>(MostVerticalView(out.sample))).camera_id : std::string();
   Image fine_surface_height, fine_solve_height, fine_marks;
-  if (fine_fit || (fit_facets && facet_normals.empty())) {
-    if (fine_fit) fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
+  if (fine_fit || top_view_fit || (fit_facets && facet_normals.empty())) {
+    if (fine_fit || top_view_fit) fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
     if (!fine_near_height.empty()) {
       fine_solve_height = fine_near_height;  // near lights' last round on the fine grid
     } else if (!geometry.photometric_stereo.height_mm.empty()) {
@@ -689,9 +697,12 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       }
     }
   }
-  // Its normals and albedo (the surface's heights are the caller's to add).
-  auto fine_band_surface = [&](int b, Stack* band, bool with_fibre_turns = true) -> fitting::SurfaceGeometry {
+  // Its normals and albedo (the surface's heights are the caller's to add). `only_camera` (not
+  // empty): the band keeps that camera's observations alone, before they are marked.
+  auto fine_band_surface = [&](int b, Stack* band, bool with_fibre_turns = true,
+                               const std::string& only_camera = {}) -> fitting::SurfaceGeometry {
     *band = fine_bands.Build(frames, b);
+    if (!only_camera.empty()) KeepCameraObservations(only_camera, band);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     if (!fine_band_marks.empty()) {
       const double start = SteadySeconds();
@@ -780,13 +791,14 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   }
   fitting::FinishPixelMaps(model, tally, &out.fit);
   // --ps-supersample: the normals refined once more on the fine bands (as FitSideWithFineNormals
-  // does on one band), their unit normals averaged onto the maps and their heights integrated on
-  // the whole fine grid.
+  // does on one band; a tilted view's against its top view alone, as FitSideRefiningTopViewNormals
+  // does), their unit normals averaged onto the maps and their heights integrated on the whole fine
+  // grid.
   Image fine_height;
   double fine_fit_seconds = 0.0;
   std::string placed;  // what the plan placement moved, for the report
   const bool fine_solves_kept = !fine_fit_normal.empty();
-  if (fine_fit && !out.fit.normals.empty()) {
+  if ((fine_fit && !out.fit.normals.empty()) || top_view_fit) {
     const double fine_start = SteadySeconds();
     Image fine_normals(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
@@ -805,27 +817,31 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
             ? PlanPlacement(fine_marks.empty() ? fine_surface_height : fine_marks, fine_valid, parallax, fine_factor)
             : PlanPlacement();
     placed = PlacementDetail(placement, fine_grid.pitch_mm);
+    std::optional<fitting::ClusterModel> top_model;  // a tilted view's: the model for the top view's observations
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
-      fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band);
+      fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band, true, top_camera);
       const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
       band_surface.height_mm = CropRows(fine_surface_height, row0, rows);
-      fitting::FitResult band_fit = fitting::StartPixelMaps(model, band.grid);
-      fitting::FitPixelRows(model, band, band_surface, 0, &band_fit, &fine_tally);
+      if (top_view_fit && !top_model) top_model = ModelForTopViewNormals(model, out.sample, band);
+      const fitting::ClusterModel& refining = top_model ? *top_model : model;
+      fitting::FitResult band_fit = fitting::StartPixelMaps(refining, band.grid);
+      fitting::FitPixelRows(refining, band, band_surface, 0, &band_fit, &fine_tally);
       PasteRows(band_fit.normals, row0, &fine_normals);
       const Image band_weights = SurfaceAreaWeights(band_fit.normals, parallax, row0);
       if (!band_weights.empty()) PasteRows(band_weights, row0, &fine_weights);
-      if (options.base_colour_from_fine_grid) {
+      // The top view's pass writes the normals alone (top_view_normals.h).
+      if (options.base_colour_from_fine_grid && !top_view_fit) {
         colour.Add(band_fit.base_color, band_fit.cluster_id, row0, band_weights, placement);
       }
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
-    if (options.base_colour_from_fine_grid) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
+    if (options.base_colour_from_fine_grid && !top_view_fit) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
     fine_fit_normal = fine_fit_albedo = Image();  // before the fine integration's work space
     fine_band_marks = BandShadowMarks();
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
                                               fine_factor, grid.pitch_mm, near, options, progress, placement,
-                                              &out.fit.normals);
+                                              &out.fit.normals, top_view_fit ? &geometry.height_mm : nullptr);
     fine_fit_seconds = SteadySeconds() - fine_start;
   }
   out.fit.times.total_s = SteadySeconds() - start;
@@ -847,7 +863,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
                        std::to_string(bands.build_seconds() + fine_bands.build_seconds() - build_before_fit) +
                        " s included)";
   if (fit_facets) detail += FacetsDetail(fine_factor);
-  if (fine_fit_seconds > 0.0) {
+  if (top_view_fit) {
+    detail += TopViewNormalsDetail(fine_factor, top_camera, fine_fit_seconds) + placed;
+  } else if (fine_fit_seconds > 0.0) {
     char fine_detail[160];
     std::snprintf(fine_detail, sizeof fine_detail, "; normals refined on the %dx finer grid (%.2f s of it; %s)", fine_factor,
                   fine_fit_seconds,
