@@ -34,6 +34,9 @@ fitting::ClusterModel ModelForTopViewNormals(const fitting::ClusterModel& model,
   }
   fitting::ClusterModel out = model;
   out.options.refine_pixel_normals = true;
+  // The pass keeps the normals alone, which are refined at the cluster's parameters either way:
+  // no pixel's own parameters are fitted (FitMode::kPerPixel's step), only its closed-form colour.
+  out.options.mode = fitting::FitMode::kClusters;
   out.observation_levels.clear();
   for (const Observation& o : top.observations) {
     const std::string& light = top.lights.at(static_cast<std::size_t>(o.light)).id;

@@ -43,7 +43,8 @@ void KeepCameraObservations(const std::string& camera_id, Stack* stack);
 
 // `model`, fitted on `fitted`'s observations, for the per-pixel step on `top`, whose observations are
 // some of `fitted`'s (the same light id and camera; any order): each observation's noise level taken
-// from the same (light, camera) of `fitted`, and the per-pixel normal refinement on. Throws
+// from the same (light, camera) of `fitted`, the per-pixel normal refinement on and the pixels' own
+// parameters not fitted (FitMode::kClusters: the normals do not depend on them). Throws
 // std::invalid_argument naming the light and camera of an observation `fitted` does not hold.
 fitting::ClusterModel ModelForTopViewNormals(const fitting::ClusterModel& model, const Stack& fitted, const Stack& top);
 

@@ -51,6 +51,7 @@ TEST(TopViewNormals, TheModelTakesEachObservationsNoiseLevelByLightAndCamera) {
   const Stack fitted = TwoCameraStack();
   fitting::ClusterModel model;
   model.options.refine_pixel_normals = false;  // as a tilted view's fit has it
+  model.options.mode = fitting::FitMode::kPerPixel;
   for (std::size_t i = 0; i < fitted.observations.size(); ++i) model.observation_levels.push_back(10.0 + i);
   // The top view's observations in another order, and in a stack whose views are numbered
   // otherwise (the fine stack of one view holds that view alone).
@@ -66,6 +67,7 @@ TEST(TopViewNormals, TheModelTakesEachObservationsNoiseLevelByLightAndCamera) {
   }
   const fitting::ClusterModel refining = ModelForTopViewNormals(model, fitted, top);
   EXPECT_TRUE(refining.options.refine_pixel_normals);
+  EXPECT_EQ(refining.options.mode, fitting::FitMode::kClusters);  // the normals alone are kept
   // fitted: oblique L00..L02 are 10, 11, 12; top L00..L02 are 13, 14, 15.
   ASSERT_EQ(refining.observation_levels.size(), 2u);
   EXPECT_EQ(refining.observation_levels[0], 15.0);
