@@ -240,6 +240,9 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // lights refined on the finer grid keep the latter every round (below, "Near point lights").
   Image fine_shadow_height;
   Image fine_last_normal, fine_last_confidence;
+  // With keep_last_albedo (set below, before the first sweep) those sweeps' fine albedo too.
+  Image fine_last_albedo;
+  bool keep_last_albedo = false;
   // With distant lights, the first sweep's whole fine solve (37 B a fine pixel: maps and pixel
   // states), from which the marked sweep solves again only the pixels a mark changes
   // (SolvePhotometricStereoAgain, as one band does); that sweep updates it in place, and the fit
@@ -326,6 +329,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     if (role.keep_fine && fine_factor > 1 && fine_last_normal.empty()) {
       fine_last_normal = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
       fine_last_confidence = Image(solve_grid.width, solve_grid.height, 1, 0.0f, solve_grid.pitch_mm);
+      if (keep_last_albedo) fine_last_albedo = Image(solve_grid.width, solve_grid.height, 3, 0.0f, solve_grid.pitch_mm);
     }
     // Solving again from fine_first updates it in place (a band's rows are cropped before its solve);
     // the fit then takes its normals and albedo.
@@ -371,6 +375,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       if (role.keep_fine && fine_factor > 1) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_last_normal);
         PasteRows(band_ps.confidence, solved.Row0(b), &fine_last_confidence);
+        if (!fine_last_albedo.empty()) PasteRows(band_ps.albedo, solved.Row0(b), &fine_last_albedo);
       }
       if (keep_for_fit && !again_in_place) {
         PasteRows(band_ps.normal, solved.Row0(b), &fine_fit_normal);
@@ -433,10 +438,19 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // "Facets of the finer grid"): the whole fine grid's, 12 B a fine pixel.
   const bool fit_facets = fine_factor > 1 && options.fit_facets && NeedsReliefRegistration(out.sample);
   Image facet_normals;
+  // A tilted view: the normals refined on the fine bands against its top view alone, once the
+  // clusters are fitted (top_view_normals.h); the bands' other views are left out of that pass.
+  const bool top_view_fit = RefinesTopViewNormals(options, fine_factor);
+  const std::string top_camera =
+      top_view_fit ? out.sample.views.at(static_cast<std::size_t>(MostVerticalView(out.sample))).camera_id : std::string();
+  // With the facets from the near-light rounds (below), their sweep's fine albedo beside them (12 B
+  // a fine pixel), so that the top view's pass takes both instead of solving every fine band again.
+  Image facet_albedo;
   // Fine bands of distant lights whose shadows are marked: the first solve's fine normals kept
   // for the fine heights (fine_shadow_height above). Near lights refined on fine bands: every
   // sweep's, for the next round's heights. The sample, and so the lights, are known.
   const bool fine_near_rounds = fine_factor > 1 && HasPointLights(out.sample) && ps_options.refine_height;
+  keep_last_albedo = top_view_fit && fit_facets && fine_near_rounds;
   // Distant lights marked after the first sweep: the marked sweep solves again only the pixels a
   // mark changes, from the first sweep's whole solve (SolvePhotometricStereoAgain, as one band).
   const bool solve_again_after_marks =
@@ -568,9 +582,13 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     }
     // The last sweep's fine normals are the kept round's unless that round was rejected: the
     // facets, without solving the fine bands again.
-    if (fit_facets && fine_near_rounds && !last_round_rejected) facet_normals = std::move(fine_last_normal);
+    if (fit_facets && fine_near_rounds && !last_round_rejected) {
+      facet_normals = std::move(fine_last_normal);
+      facet_albedo = std::move(fine_last_albedo);
+    }
     fine_last_normal = Image();
     fine_last_confidence = Image();
+    fine_last_albedo = Image();
     // The sweeps timed their marks into shadow_seconds; the rest (solves, integrations) is
     // photometric stereo's.
     solve_seconds = solve_before + (SteadySeconds() - start) - (shadow_seconds - shadow_before);
@@ -674,11 +692,6 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // marks'. 4 B a fine pixel each, made when a fine pass below needs them (the facets' solve needs
   // the last two, not the surface's).
   const MetricGrid& fine_grid = fine_calibration.grid;
-  // A tilted view: the normals refined on the fine bands against its top view alone, once the
-  // clusters are fitted (top_view_normals.h); the bands' other views are left out of that pass.
-  const bool top_view_fit = RefinesTopViewNormals(options, fine_factor);
-  const std::string top_camera =
-      top_view_fit ? out.sample.views.at(static_cast<std::size_t>(MostVerticalView(out.sample))).camera_id : std::string();
   Image fine_surface_height, fine_solve_height, fine_marks;
   if (fine_fit || top_view_fit || (fit_facets && facet_normals.empty())) {
     if (fine_fit || top_view_fit) fine_surface_height = UpsampleLinear(geometry.height_mm, fine_factor);
@@ -714,6 +727,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     fitting::SurfaceGeometry surface;
     if (!fine_fit_normal.empty()) {
       surface = {CropRows(fine_fit_normal, row0, rows), CropRows(fine_fit_albedo, row0, rows), Image(), Image(), Image(), 1};
+    } else if (!facet_albedo.empty()) {  // a tilted view's last near-light round: the facets and their albedo
+      surface = {CropRows(facet_normals, row0, rows), CropRows(facet_albedo, row0, rows), Image(), Image(), Image(), 1};
     } else {
       PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
           *band, ps_options,
@@ -837,7 +852,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       ReportProgress(progress, "fit: pixels on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
     }
     if (options.base_colour_from_fine_grid && !top_view_fit) colour.ApplyTo(out.fit.cluster_id, &out.fit.base_color);
-    fine_fit_normal = fine_fit_albedo = Image();  // before the fine integration's work space
+    fine_fit_normal = fine_fit_albedo = facet_albedo = Image();  // before the fine integration's work space
     fine_band_marks = BandShadowMarks();
     fine_height = IntegrateFineRefinedNormals(std::move(fine_normals), fine_valid, fine_weights, geometry.valid,
                                               fine_factor, grid.pitch_mm, near, options, progress, placement,
