@@ -101,7 +101,8 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
     run.fitted_normals =
         fine_height.empty()
             ? AdoptFittedNormals(&run.fit, stack.grid, near, side_stages, &run.reconstruction, report, progress)
-            : AdoptFineFittedNormals(&run.fit, std::move(fine_height), &run.reconstruction, report);
+            : AdoptFineFittedNormals(&run.fit, std::move(fine_height), &run.reconstruction, report,
+                                     RefinesTopViewNormals(side_stages, k));
     if (tilted_view && !run.fitted_normals) report->steps.push_back(TiltedViewNormalsStep());
     run.residual = FitResidualMap(run.fit, stack, run.reconstruction, kResidualObservations, &run.residual_mean);
     if (!held_out.empty()) run.held_out = CheckHeldOutLights(run.fit, stack, run.reconstruction, std::move(held_out), stages);

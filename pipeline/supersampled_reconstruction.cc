@@ -269,14 +269,18 @@ fitting::FitResult FitSideWithFineNormals(const Stack& stack, const SideReconstr
   return fit;
 }
 
-bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report) {
+bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report,
+                            bool top_view) {
   if (fit->normals.empty() || fine_height_mm.empty()) return false;
   side->photometric_stereo.normal = std::move(fit->normals);
   fit->normals = Image();
   side->height_mm = std::move(fine_height_mm);
   report->steps.push_back({"integration of the fitted normals (on the finer grid)", true,
-                           "normals refined with the fitted model on the finer grid; height integrated there, each map "
-                           "pixel the mean of its fine heights (time in the fit's step)",
+                           top_view ? "normals refined against the top view with the fitted model on the finer grid; "
+                                      "height: its detail integrated there, each map pixel the mean of its fine "
+                                      "heights, its long wavelengths photometric stereo's (time in the fit's step)"
+                                    : "normals refined with the fitted model on the finer grid; height integrated "
+                                      "there, each map pixel the mean of its fine heights (time in the fit's step)",
                            0.0});
   return true;
 }

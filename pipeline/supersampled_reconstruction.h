@@ -142,7 +142,10 @@ Image IntegrateFineRefinedNormals(Image fine_normals, const Image& fine_valid, c
 
 // AdoptFittedNormals with the height from the fine grid (FitSideWithFineNormals' `fine_height_mm`):
 // the fit's normals replace the reconstruction's and `fine_height_mm` its height; reports the
-// step. Returns false (nothing done) when the fit has no normals or the height is empty.
-bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report);
+// step, which says so when the normals were refined against the top view alone and the height's
+// long wavelengths are photometric stereo's (`top_view`, top_view_normals.h). Returns false
+// (nothing done) when the fit has no normals or the height is empty.
+bool AdoptFineFittedNormals(fitting::FitResult* fit, Image fine_height_mm, SideReconstruction* side, RunReport* report,
+                            bool top_view = false);
 
 }  // namespace u3mscan

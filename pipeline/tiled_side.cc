@@ -864,7 +864,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // normal map is in memory already, so the height is integrated again as in the untiled path.
   out.fitted_normals = fine_height.empty()
                            ? AdoptFittedNormals(&out.fit, grid, near, options, &out.reconstruction, report, progress)
-                           : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report);
+                           : AdoptFineFittedNormals(&out.fit, std::move(fine_height), &out.reconstruction, report,
+                                                    top_view_fit);
   std::string sampled;  // where the clusters' sample came from
   if (clusters_on_fine_grid) {
     const std::string block = std::to_string(step * fine_factor);

@@ -425,6 +425,10 @@ TEST(SupersampledReconstruction, WithATiltedViewTheNormalsAreRefinedAgainstTheTo
   ASSERT_NE(fit_step, nullptr);
   EXPECT_NE(fit_step->reason.find("normals refined on the 2x finer grid against view top alone"), std::string::npos)
       << fit_step->reason;
+  const StepRecord* adopted = FindStep(refined.result.report, "integration of the fitted normals (on the finer grid)");
+  ASSERT_NE(adopted, nullptr);
+  EXPECT_NE(adopted->reason.find("long wavelengths photometric stereo's"), std::string::npos) << adopted->reason;
+  EXPECT_EQ(FindStep(unrefined.result.report, "integration of the fitted normals (on the finer grid)"), nullptr);
   const StepRecord* unrefined_fit = FindStep(unrefined.result.report, "fit");
   ASSERT_NE(unrefined_fit, nullptr);
   EXPECT_EQ(unrefined_fit->reason.find("refined"), std::string::npos) << unrefined_fit->reason;
@@ -515,6 +519,9 @@ TEST(SupersampledReconstruction, WithATiltedViewBandsFitTheFinerGridsFacetsAsOne
   // The normals, refined against the top view in both (pipeline/top_view_normals.h).
   for (const RunReport* report : {&whole.report, &banded.report}) {
     EXPECT_NE(FindStep(*report, "fit")->reason.find("against view top alone"), std::string::npos);
+    const StepRecord* adopted = FindStep(*report, "integration of the fitted normals (on the finer grid)");
+    ASSERT_NE(adopted, nullptr);
+    EXPECT_NE(adopted->reason.find("long wavelengths photometric stereo's"), std::string::npos) << adopted->reason;
   }
   const Image na = ReadImageFile(dir / "whole" / "maps" / "normal.exr", PixelEncoding::kLinear);
   const Image nb = ReadImageFile(dir / "banded" / "maps" / "normal.exr", PixelEncoding::kLinear);
