@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <optional>
 #include <string>
 
@@ -441,8 +442,11 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
   // A tilted view: the normals refined on the fine bands against its top view alone, once the
   // clusters are fitted (top_view_normals.h); the bands' other views are left out of that pass.
   const bool top_view_fit = RefinesTopViewNormals(options, fine_factor);
-  const std::string top_camera =
-      top_view_fit ? out.sample.views.at(static_cast<std::size_t>(MostVerticalView(out.sample))).camera_id : std::string();
+  // The facets' solve and that pass read the top view alone: their fine bands are built from its
+  // frames only, not from every view's.
+  const std::string top_camera = fit_facets || top_view_fit
+                                     ? out.sample.views.at(static_cast<std::size_t>(MostVerticalView(out.sample))).camera_id
+                                     : std::string();
   // With the facets from the near-light rounds (below), their sweep's fine albedo beside them (12 B
   // a fine pixel), so that the top view's pass takes both instead of solving every fine band again.
   Image facet_albedo;
@@ -710,12 +714,19 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       }
     }
   }
-  // Its normals and albedo (the surface's heights are the caller's to add). `only_camera` (not
-  // empty): the band keeps that camera's observations alone, before they are marked.
+  // Its normals and albedo (the surface's heights are the caller's to add). `top_view_only`: the
+  // band is built from the top camera's frames alone (top_camera), and solved on all it holds.
+  std::vector<std::size_t> top_frames;
+  if (!top_camera.empty()) {
+    std::copy_if(frames.begin(), frames.end(), std::back_inserter(top_frames), [&](std::size_t index) {
+      return prepared.capture.manifest().frames[index].camera == top_camera;
+    });
+  }
+  reconstruction::PhotometricStereoOptions top_ps_options = ps_options;
+  top_ps_options.view = -1;  // a band of the top view's frames holds that view alone
   auto fine_band_surface = [&](int b, Stack* band, bool with_fibre_turns = true,
-                               const std::string& only_camera = {}) -> fitting::SurfaceGeometry {
-    *band = fine_bands.Build(frames, b);
-    if (!only_camera.empty()) KeepCameraObservations(only_camera, band);
+                               bool top_view_only = false) -> fitting::SurfaceGeometry {
+    *band = fine_bands.Build(top_view_only ? top_frames : frames, b);
     const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
     if (!fine_band_marks.empty()) {
       const double start = SteadySeconds();
@@ -731,7 +742,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       surface = {CropRows(facet_normals, row0, rows), CropRows(facet_albedo, row0, rows), Image(), Image(), Image(), 1};
     } else {
       PhotometricStereoResult solved = reconstruction::SolvePhotometricStereoAt(
-          *band, ps_options,
+          *band, top_view_only ? top_ps_options : ps_options,
           fine_solve_height.empty()
               ? Image(fine_grid.width, rows, 1, static_cast<float>(ps_options.integration.mean_height_mm), fine_grid.pitch_mm)
               : CropRows(fine_solve_height, row0, rows));
@@ -752,7 +763,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
       facet_normals = Image(fine_grid.width, fine_grid.height, 3, 0.0f, fine_grid.pitch_mm);
       for (int b = 0; b < fine_bands.count(); ++b) {
         Stack band;
-        PasteRows(fine_band_surface(b, &band, /*with_fibre_turns=*/false).normals, fine_bands.Row0(b), &facet_normals);
+        PasteRows(fine_band_surface(b, &band, /*with_fibre_turns=*/false, /*top_view_only=*/true).normals,
+                  fine_bands.Row0(b), &facet_normals);
         ReportProgress(progress, "fit: facets on the finer grid", static_cast<double>(b + 1) / fine_bands.count());
       }
     }
@@ -835,7 +847,7 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     std::optional<fitting::ClusterModel> top_model;  // a tilted view's: the model for the top view's observations
     for (int b = 0; b < fine_bands.count(); ++b) {
       Stack band;
-      fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band, true, top_camera);
+      fitting::SurfaceGeometry band_surface = fine_band_surface(b, &band, true, /*top_view_only=*/top_view_fit);
       const int row0 = fine_bands.Row0(b), rows = fine_bands.Rows(b);
       band_surface.height_mm = CropRows(fine_surface_height, row0, rows);
       if (top_view_fit && !top_model) top_model = ModelForTopViewNormals(model, out.sample, band);

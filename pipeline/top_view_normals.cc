@@ -16,12 +16,6 @@ bool RefinesTopViewNormals(const StageOptions& options, int k) {
   return k > 1 && options.refine_top_view_normals && options.photometric_stereo.view >= 0;
 }
 
-void KeepCameraObservations(const std::string& camera_id, Stack* stack) {
-  std::erase_if(stack->observations, [&](const Observation& o) {
-    return stack->views.at(static_cast<std::size_t>(o.view)).camera_id != camera_id;
-  });
-}
-
 fitting::ClusterModel ModelForTopViewNormals(const fitting::ClusterModel& model, const Stack& fitted, const Stack& top) {
   if (model.observation_levels.size() != fitted.observations.size()) {
     throw std::invalid_argument("ModelForTopViewNormals: the model's noise levels are not the fitted stack's observations");

@@ -37,10 +37,6 @@ namespace u3mscan {
 // options.refine_top_view_normals.
 bool RefinesTopViewNormals(const StageOptions& options, int k);
 
-// The stack's observations of camera `camera_id` alone. Its lights and views are kept, so that the
-// observations' indices still hold.
-void KeepCameraObservations(const std::string& camera_id, Stack* stack);
-
 // `model`, fitted on `fitted`'s observations, for the per-pixel step on `top`, whose observations are
 // some of `fitted`'s (the same light id and camera; any order): each observation's noise level taken
 // from the same (light, camera) of `fitted`, the per-pixel normal refinement on and the pixels' own

@@ -1,5 +1,5 @@
 // The pieces of a tilted capture's top-view normal refinement (pipeline/top_view_normals.h): the
-// band's observations of one camera, and the cluster model's noise levels carried over to them.
+// cluster model's noise levels carried over to the top view's observations, and when it runs.
 #include "pipeline/top_view_normals.h"
 
 #include <gtest/gtest.h>
@@ -31,20 +31,6 @@ Stack TwoCameraStack() {
     }
   }
   return stack;
-}
-
-TEST(TopViewNormals, KeepsOneCamerasObservationsAndEveryLightAndView) {
-  Stack stack = TwoCameraStack();
-  KeepCameraObservations("top", &stack);
-  ASSERT_EQ(stack.observations.size(), 3u);
-  for (std::size_t i = 0; i < stack.observations.size(); ++i) {
-    EXPECT_EQ(stack.views.at(static_cast<std::size_t>(stack.observations[i].view)).camera_id, "top");
-    EXPECT_EQ(stack.observations[i].light, static_cast<int>(i));
-  }
-  EXPECT_EQ(stack.views.size(), 2u);  // indices still hold
-  EXPECT_EQ(stack.lights.size(), 3u);
-  KeepCameraObservations("side", &stack);
-  EXPECT_TRUE(stack.observations.empty());
 }
 
 TEST(TopViewNormals, TheModelTakesEachObservationsNoiseLevelByLightAndCamera) {
