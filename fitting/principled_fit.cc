@@ -1316,8 +1316,15 @@ void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResu
 
 FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
                         const ProgressCallback& progress) {
+  ClusterModel model;
+  return FitPrincipled(stack, geometry, options, progress, &model);
+}
+
+FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                        const ProgressCallback& progress, ClusterModel* model_out) {
   const double t_start = SteadySeconds();
-  const ClusterModel model = FitClusterModel(stack, geometry, options, progress);
+  ClusterModel& model = *model_out;
+  model = FitClusterModel(stack, geometry, options, progress);
   FitResult result = StartPixelMaps(model, stack.grid);
   PixelTally tally;
   FitPixelRows(model, stack, geometry, 0, &result, &tally, progress);

@@ -60,4 +60,9 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
 // Pixel counts, convergence figures and the map decisions, once every band is done.
 void FinishPixelMaps(const ClusterModel& model, const PixelTally& tally, FitResult* result);
 
+// FitPrincipled, handing back in `model` (not null) the cluster model its maps were made from, for a
+// later per-pixel step on other observations (pipeline/top_view_normals.h).
+FitResult FitPrincipled(const Stack& stack, const SurfaceGeometry& geometry, const FitOptions& options,
+                        const ProgressCallback& progress, ClusterModel* model);
+
 }  // namespace u3mscan::fitting

@@ -7,6 +7,7 @@
 #include "core/elapsed.h"
 #include "core/error.h"
 #include "core/logging.h"
+#include "fitting/tiled_fit.h"
 
 namespace u3mscan {
 
@@ -300,15 +301,24 @@ std::string FacetsDetail(int fine_factor) {
   return ", every photograph fitted as the mixture of the " + std::to_string(fine_factor) + "x finer grid's facets";
 }
 
+fitting::FitResult FitSideKeepingModel(const Stack& stack, const SideReconstruction& geometry,
+                                       const StageOptions& options, const ProgressCallback& progress,
+                                       fitting::ClusterModel* model, std::string* detail) {
+  fitting::SurfaceGeometry surface = SideSurface(geometry);
+  surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
+  fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress, model);
+  *detail = std::to_string(fit.clusters.size()) + " clusters";
+  if (!surface.fine_normals.empty()) *detail += FacetsDetail(surface.fine_factor);
+  return fit;
+}
+
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress) {
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
-  fitting::SurfaceGeometry surface = SideSurface(geometry);
-  surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
-  fitting::FitResult fit = fitting::FitPrincipled(stack, surface, options.fit, progress);
-  std::string detail = std::to_string(fit.clusters.size()) + " clusters";
-  if (!surface.fine_normals.empty()) detail += FacetsDetail(surface.fine_factor);
+  fitting::ClusterModel model;
+  std::string detail;
+  fitting::FitResult fit = FitSideKeepingModel(stack, geometry, options, progress, &model, &detail);
   ReportFitStep(fit, detail, SteadySeconds() - start, report);
   return fit;
 }

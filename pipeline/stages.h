@@ -23,6 +23,10 @@
 
 namespace u3mscan {
 
+namespace fitting {
+struct ClusterModel;  // fitting/tiled_fit.h
+}  // namespace fitting
+
 struct PreparedCapture {
   Capture capture;
   CalibrationResult calibration;
@@ -96,6 +100,13 @@ std::string FacetsDetail(int fine_factor);
 
 fitting::FitResult FitSide(const Stack& stack, const SideReconstruction& geometry, const StageOptions& options,
                            RunReport* report, const ProgressCallback& progress = {});
+
+// FitSide's fit, not reported: also hands back the cluster model its maps were made from (`model`,
+// not null: for a further per-pixel pass with the clusters' lobes, top_view_normals.h) and the fit
+// step's words (`detail`, not null; ReportFitStep adds the stage times).
+fitting::FitResult FitSideKeepingModel(const Stack& stack, const SideReconstruction& geometry,
+                                       const StageOptions& options, const ProgressCallback& progress,
+                                       fitting::ClusterModel* model, std::string* detail);
 
 // The report's "cast shadows" step: off, or the share marked and the marking time (seconds).
 // solved_again_share: of the pixels, after the marks (< 0: not told).

@@ -63,14 +63,9 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
   ReportObliqueView(stack, report);
   const double start = SteadySeconds();
   const int k = fine.k;
-  // FitSide's fit, its model kept for the fine pass (FitPrincipled is these three stages).
-  fitting::SurfaceGeometry surface = SideSurface(geometry);
-  surface.fibre_turn_deg = FibreTurnsIfFollowed(surface.normals, options);
-  const fitting::ClusterModel model = fitting::FitClusterModel(stack, surface, options.fit, progress);
-  fitting::FitResult fit = fitting::StartPixelMaps(model, stack.grid);
-  fitting::PixelTally tally;
-  fitting::FitPixelRows(model, stack, surface, 0, &fit, &tally, progress);
-  fitting::FinishPixelMaps(model, tally, &fit);
+  fitting::ClusterModel model;
+  std::string detail;
+  fitting::FitResult fit = FitSideKeepingModel(stack, geometry, options, progress, &model, &detail);
 
   const double fine_start = SteadySeconds();
   const std::string camera = fine.stack.views.at(static_cast<std::size_t>(fine.stack.observations.front().view)).camera_id;
@@ -97,8 +92,6 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
   const double fine_seconds = SteadySeconds() - fine_start;
   fine = FineReconstruction();
   fit.times.total_s = SteadySeconds() - start;
-  std::string detail = std::to_string(fit.clusters.size()) + " clusters";
-  if (!surface.fine_normals.empty()) detail += FacetsDetail(surface.fine_factor);
   ReportFitStep(fit, detail + TopViewNormalsDetail(k, camera, fine_seconds), SteadySeconds() - start, report);
   return fit;
 }

@@ -63,6 +63,15 @@ struct ProcessedRun {
   bench::Evaluation evaluation;
 };
 
+// `options` run on the capture of `synth` into dir/name, and evaluated against its truth.
+ProcessedRun ProcessAndEvaluate(const test::TempDir& dir, const std::filesystem::path& synth,
+                                const ProcessOptions& options, const std::string& name) {
+  ProcessedRun run;
+  run.result = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / name, name}, options);
+  run.evaluation = bench::Evaluate(dir / name, synth / synthetic::kTruthSubdir);
+  return run;
+}
+
 ProcessedRun Process(const test::TempDir& dir, const std::filesystem::path& synth, int ps_supersample, double max_memory_gib = 4.0,
                      bool fit_on_maps_grid = false) {
   ProcessOptions options = FastOntoTheMaps();
@@ -74,9 +83,7 @@ ProcessedRun Process(const test::TempDir& dir, const std::filesystem::path& synt
   name += '_';
   name += std::to_string(max_memory_gib);
   if (fit_on_maps_grid) name += "_maps_fit";
-  ProcessedRun run;
-  run.result = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / name, name}, options);
-  run.evaluation = bench::Evaluate(dir / name, synth / synthetic::kTruthSubdir);
+  ProcessedRun run = ProcessAndEvaluate(dir, synth, options, name);
   std::cout << "[ MEASURED ] --ps-supersample " << ps_supersample << ": normal mean "
             << run.evaluation.normal_mean_deg << " deg, height " << run.evaluation.height_rmse_percent << " %"
             << (fit_on_maps_grid ? ", clusters fitted on the maps' grid" : "");
@@ -372,9 +379,7 @@ TEST(SupersampledReconstruction, WithATiltedViewThePhotographsAreFittedAsTheFine
   ProcessOptions options = FastOntoTheMaps();
   auto run = [&](bool one_normal, const std::string& name) {
     options.one_normal_per_pixel = one_normal;
-    ProcessedRun out;
-    out.result = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / name, name}, options);
-    out.evaluation = bench::Evaluate(dir / name, synth / synthetic::kTruthSubdir);
+    ProcessedRun out = ProcessAndEvaluate(dir, synth, options, name);
     const bench::ParameterError& sheen = bench::FindParameter(out.evaluation, "sheen");
     std::cout << "[ MEASURED ] " << name << ": sheen " << sheen.estimate_mean << " for " << sheen.truth_mean
               << " (error " << sheen.mean_abs_error << "), roughness error "
@@ -410,9 +415,7 @@ TEST(SupersampledReconstruction, WithATiltedViewTheNormalsAreRefinedAgainstTheTo
   ProcessOptions options = FastOntoTheMaps();
   auto run = [&](bool refine, const std::string& name) {
     options.no_top_view_refinement = !refine;
-    ProcessedRun out;
-    out.result = ProcessCapture({synth / synthetic::kCaptureSubdir, dir / name, name}, options);
-    out.evaluation = bench::Evaluate(dir / name, synth / synthetic::kTruthSubdir);
+    ProcessedRun out = ProcessAndEvaluate(dir, synth, options, name);
     std::cout << "[ MEASURED ] " << name << ": normal mean " << out.evaluation.normal_mean_deg << " deg, height "
               << out.evaluation.height_levelled_rmse_percent << " % (levelled as the run)\n";
     return out;
