@@ -1,5 +1,6 @@
 #include "capture/capture.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "core/parallel.h"
@@ -119,19 +120,27 @@ std::shared_ptr<const CompactFrame> Capture::CachedWhole(std::size_t index) cons
     for (const auto& entry : cache_->entries) {
       if (entry.first == index) return entry.second;
     }
+    if (std::find(cache_->refused.begin(), cache_->refused.end(), index) != cache_->refused.end()) return nullptr;
   }
+  if (options_.decode_cache_bytes == 0) return nullptr;
   // Decode outside the lock: other threads keep reading. Two threads asking for the same frame
   // at once may both decode it; the second insert is dropped.
   auto decoded = std::make_shared<const CompactFrame>(DecodeWholeFrame(FramePath(index), DecodeOptions(index)));
-  if (decoded->bytes() > options_.decode_cache_bytes) return decoded;
   std::lock_guard<std::mutex> lock(cache_->mutex);
   for (const auto& entry : cache_->entries) {
     if (entry.first == index) return entry.second;
   }
   // Full: keep the frames already cached and hand this one out uncached. The band sweeps read the
   // frames in the same order every time, so evicting (least recently used) would miss on every
-  // read once the frames outnumber the cache; keeping them hits on the cached ones each sweep.
-  if (cache_->bytes + decoded->bytes() > options_.decode_cache_bytes) return decoded;
+  // read once the frames outnumber the cache; keeping them hits on the cached ones each sweep. The
+  // frame is read by region from then on: decoding it whole again for every band would cost a
+  // whole decode per band where a compressed TIFF inflates only the band's strips.
+  if (cache_->bytes + decoded->bytes() > options_.decode_cache_bytes) {
+    if (std::find(cache_->refused.begin(), cache_->refused.end(), index) == cache_->refused.end()) {
+      cache_->refused.push_back(index);
+    }
+    return decoded;
+  }
   cache_->entries.emplace_front(index, decoded);
   cache_->bytes += decoded->bytes();
   return decoded;
@@ -156,8 +165,9 @@ DecodedFrame Capture::LoadFrameRegion(std::size_t index, int x, int y, int w, in
                                       const FrameLoadOptions& options) const {
   const fs::path path = FramePath(index);
   DecodedFrame decoded;
-  if (KeepsWhole(index)) {
-    decoded = CachedWhole(index)->Crop(x, y, w, h);
+  const std::shared_ptr<const CompactFrame> whole = KeepsWhole(index) ? CachedWhole(index) : nullptr;
+  if (whole) {
+    decoded = whole->Crop(x, y, w, h);
   } else {
     decoded = DecodeFrameRegion(path, DecodeOptions(index), x, y, w, h);
   }
@@ -170,10 +180,16 @@ std::size_t Capture::cached_bytes() const {
   return cache_->bytes;
 }
 
+std::size_t Capture::frames_read_by_region() const {
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  return cache_->refused.size();
+}
+
 void Capture::ReleaseCache() const {
   std::lock_guard<std::mutex> lock(cache_->mutex);
   cache_->entries.clear();
   cache_->bytes = 0;
+  cache_->refused.clear();
 }
 
 }  // namespace u3mscan

@@ -12,10 +12,10 @@
 //     cache in 16-bit form (CompactFrame, 7 bytes a pixel) and the band sweeps over all frames
 //     decode each once.
 //     The cache is bounded by CaptureOptions::decode_cache_bytes (when full it keeps the frames it
-//     has and decodes the others again on every read: band sweeps read the frames in one order,
-//     where dropping the least recently used would miss every time) and can be emptied with
-//     ReleaseCache(). 32 frames of 36 MP: 8.1 GB of cache for a one-decode sweep, against 15 GB as
-//     float.
+//     has: band sweeps read the frames in one order, where dropping the least recently used would
+//     miss every time; a frame that found no room is read by region from then on, as a file
+//     without keep_whole is) and can be emptied with ReleaseCache(). 32 frames of 36 MP: 8.1 GB of
+//     cache for a one-decode sweep, against 15 GB as float.
 // Thread safety: all const methods may be called from several threads at once. Copies of a
 // Capture share one cache.
 
@@ -37,7 +37,7 @@ namespace u3mscan {
 struct CaptureOptions {
   // Upper bound of the cache of frames kept whole (FrameHeader::keep_whole: RAW, PNG, JPEG,
   // compressed TIFF) used by LoadFrameRegion, bytes. 0 disables the cache (each region read of
-  // such a frame decodes it again).
+  // such a frame decodes the region alone, as a file without keep_whole is read).
   std::size_t decode_cache_bytes = std::size_t{9} << 30;  // 9 GiB: 32 frames of 36 MP
   bool Check() const { return true; }
 };
@@ -89,11 +89,15 @@ class Capture {
   }
 
   std::size_t cached_bytes() const;
+  // Frames kept whole by their header that found no room in the cache: read by region since.
+  std::size_t frames_read_by_region() const;
   void ReleaseCache() const;
 
  private:
   Capture() = default;
   void Normalise(std::size_t index, const FrameLoadOptions& options, DecodedFrame* frame) const;
+  // The frame decoded whole, from the cache or decoded and cached now; null when the frame found no
+  // room in the cache before (its region reads then decode the region alone).
   std::shared_ptr<const CompactFrame> CachedWhole(std::size_t index) const;
   // FrameHeader::keep_whole of the frame's file (read by Open).
   bool KeepsWhole(std::size_t index) const;
@@ -107,6 +111,7 @@ class Capture {
     std::mutex mutex;
     std::list<std::pair<std::size_t, std::shared_ptr<const CompactFrame>>> entries;  // latest first
     std::size_t bytes = 0;
+    std::vector<std::size_t> refused;  // frames decoded whole once that found no room
   };
   std::shared_ptr<Cache> cache_ = std::make_shared<Cache>();
 };

@@ -125,6 +125,17 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
                   run.held_out->lights.size(), 100.0 * run.held_out->relative_rmse);
     report->steps.push_back({"held-out lights " + side, true, detail, run.held_out->seconds});
   }
+  // Frames kept whole by their header (RAW, PNG, JPEG, compressed TIFF) that the decode cache had no
+  // room for are read by region on every band read since (capture/capture.h): say so, as a larger
+  // --max-memory keeps them whole. The cache is the capture's, so the count covers earlier sides.
+  if (const std::size_t by_region = prepared.capture.frames_read_by_region(); by_region > 0) {
+    char detail[240];
+    std::snprintf(detail, sizeof detail,
+                  "%.2f GiB of frames kept whole (--max-memory %.3g); %zu frame(s) found no room and are read by "
+                  "region on every band read",
+                  static_cast<double>(prepared.capture.cached_bytes()) / kBytesPerGiB, options.max_memory_gib, by_region);
+    report->steps.push_back({"decode cache " + side, true, detail, 0.0});
+  }
   report->options["tiles_" + side] = {{"bands", run.plan.bands}, {"band_rows", run.plan.band_rows},
                                       {"fit_sample_step", run.plan.sample_step},
                                       {"stack_gib", run.plan.whole_stack_bytes / kBytesPerGiB}};

@@ -168,6 +168,7 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.LoadFrameRegion(1, 0, 0, 8, 8);
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);  // full: frame 0 kept, frame 1 decoded uncached
+  EXPECT_EQ(capture.frames_read_by_region(), 1u);   // and read by region from then on
   // Sweeps of row bands over both RAW frames (as the tiled pipeline reads them): the cache never
   // exceeds its bound, and every read gives the frame's own rows.
   const DecodedFrame full0 = capture.LoadFrame(0), full1 = capture.LoadFrame(1);
@@ -182,8 +183,10 @@ TEST_F(CaptureFolder, RawDecodesAreCachedWithinTheBudget) {
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
   capture.LoadFrameRegion(3, 0, 0, 8, 8);  // a zip TIFF is kept whole too, but the cache is full
   EXPECT_EQ(capture.cached_bytes(), frame_bytes);
+  EXPECT_EQ(capture.frames_read_by_region(), 2u);
   capture.ReleaseCache();
   EXPECT_EQ(capture.cached_bytes(), 0u);
+  EXPECT_EQ(capture.frames_read_by_region(), 0u);  // room again
 
   CaptureOptions none;
   none.decode_cache_bytes = 0;
@@ -223,7 +226,42 @@ TEST(CaptureKeptWholeFrames, RegionReadsDecodeEachPngOrZipTiffOnceAndGiveTheFile
         }
     EXPECT_EQ(capture.cached_bytes(), manifest.frames.size() * frame_bytes) << ext;
     EXPECT_EQ(uncached.cached_bytes(), 0u) << ext;
+    EXPECT_EQ(uncached.frames_read_by_region(), 0u) << ext;  // never decoded whole: nothing refused
   }
+}
+
+TEST(CaptureKeptWholeFrames, FramesBeyondTheCacheAreReadByRegionAndGiveTheFilesRows) {
+  // A capture whose frames outnumber the cache (a 36 MP tilted capture: 64 frames of 253 MB
+  // against the 4 GiB of --max-memory 4) keeps the frames that fit and reads the others by region,
+  // the band's strips alone, instead of decoding them whole again for every band.
+  TempDir dir;
+  Manifest manifest = MakeManifest(kSize, kSize, ".tif");
+  for (std::size_t i = 0; i < manifest.frames.size(); ++i) {
+    const fs::path path = dir.path() / manifest.frames[i].file;
+    fs::create_directories(path.parent_path());
+    WriteImageFile(SmoothRgb(kSize, kSize, 0.05f * (i + 1), 0.9f), path, {SampleFormat::kUInt16, PixelEncoding::kLinear});
+  }
+  WriteManifest(manifest, dir.path());
+  ASSERT_GE(manifest.frames.size(), 3u);
+  const std::size_t frame_bytes = static_cast<std::size_t>(kSize) * kSize * 7 + 65536 * sizeof(float);
+  CaptureOptions room_for_two;
+  room_for_two.decode_cache_bytes = 2 * frame_bytes + frame_bytes / 2;
+  const Capture capture = Capture::Open(dir.path(), room_for_two);
+  CaptureOptions none;
+  none.decode_cache_bytes = 0;
+  const Capture uncached = Capture::Open(dir.path(), none);
+  for (int sweep = 0; sweep < 2; ++sweep)
+    for (int band = 0; band < kSize; band += 16)
+      for (std::size_t index = 0; index < manifest.frames.size(); ++index) {
+        const DecodedFrame part = capture.LoadFrameRows(index, band, 16);
+        const DecodedFrame read = uncached.LoadFrameRows(index, band, 16);
+        for (int k = 0; k < 3; ++k)
+          for (int r = 0; r < 16; ++r)
+            for (int c = 0; c < kSize; ++c) ASSERT_EQ(part.rgb.at(k, r, c), read.rgb.at(k, r, c)) << index;
+        EXPECT_LE(capture.cached_bytes(), room_for_two.decode_cache_bytes);
+      }
+  EXPECT_EQ(capture.cached_bytes(), 2 * frame_bytes);
+  EXPECT_EQ(capture.frames_read_by_region(), manifest.frames.size() - 2);
 }
 
 TEST_F(CaptureFolder, SaturationSurvivesNormalisation) {

@@ -156,6 +156,14 @@ OneBandAndBands ExpectBandsAsOneBand(const test::TempDir& dir, const std::filesy
   std::cout << "[ MEASURED ] base colour CIEDE2000: one band " << whole.evaluation.base_color_de_mean << ", "
             << banded.result.report.options["tiles_front"]["bands"] << " bands " << banded.evaluation.base_color_de_mean << "\n";
   EXPECT_NEAR(banded.evaluation.base_color_de_mean, whole.evaluation.base_color_de_mean, kMaxBandColourDifference);
+  // The bands' budget is the decode cache's too: the zip TIFF frames beyond it are read by region,
+  // and the report says so; one band's 4 GiB keeps every frame whole.
+  EXPECT_EQ(FindStep(whole.result.report, "decode cache front"), nullptr);
+  const StepRecord* cache = FindStep(banded.result.report, "decode cache front");
+  EXPECT_NE(cache, nullptr);
+  if (cache) {
+    EXPECT_NE(cache->reason.find("read by region on every band read"), std::string::npos) << cache->reason;
+  }
   return runs;
 }
 
