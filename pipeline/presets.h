@@ -56,6 +56,12 @@ struct StageOptions {
   // from the fine heights (pipeline/plan_placement.h), not where their camera rays met the grid.
   // Off only for comparisons (`process --no-plan-placement`).
   bool place_fine_pixels_on_plan = true;
+  // The camera rays along which the fit's refined fine normals are placed on the plan (set with
+  // integration.parallax by pipeline/view_parallax.h): the integration's, or, for a capture with a
+  // tilted view, whose heights are integrated without it, the most vertical view's on the face's
+  // plane. Its finer grid reads that view there, so its fine pixels lie where those rays meet the
+  // plane, up to half a map pixel from the plan at a wide field's edges (pipeline/top_view_normals.h).
+  reconstruction::ViewParallax placement_parallax;
   // With a tilted view and photometric stereo on a finer grid: the fit models every observation as
   // the mixture of each map pixel's fine normals as its camera sees them (fitting/facet_mixture.h,
   // SideReconstruction::fine_normals), not with the pixel's one normal. Off only for comparisons

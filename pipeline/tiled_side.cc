@@ -841,7 +841,8 @@ TiledSide ProcessSideTiled(const PreparedCapture& prepared, const std::string& s
     const Image fine_valid = UpsampleNearest(geometry.valid, fine_factor);
     const PlanPlacement placement =
         options.place_fine_pixels_on_plan
-            ? PlanPlacement(fine_marks.empty() ? fine_surface_height : fine_marks, fine_valid, parallax, fine_factor)
+            ? PlanPlacement(fine_marks.empty() ? fine_surface_height : fine_marks, fine_valid, options.placement_parallax,
+                            fine_factor)
             : PlanPlacement();
     placed = PlacementDetail(placement, fine_grid.pitch_mm);
     std::optional<fitting::ClusterModel> top_model;  // a tilted view's: the model for the top view's observations

@@ -68,6 +68,7 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
   fitting::FitResult fit = FitSideKeepingModel(stack, geometry, options, progress, &model, &detail);
 
   const double fine_start = SteadySeconds();
+  std::string placed;  // what the plan placement moved, for the report
   const std::string camera = fine.stack.views.at(static_cast<std::size_t>(fine.stack.observations.front().view)).camera_id;
   {
     const fitting::ClusterModel top = ModelForTopViewNormals(model, stack, fine.stack);
@@ -79,8 +80,9 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
     // Weighted and placed as ReconstructSideSupersampled averaged the photometric stereo normals.
     const Image weights = SurfaceAreaWeights(fine_fit.normals, options.integration.parallax);
     const PlanPlacement placement = options.place_fine_pixels_on_plan
-                                        ? PlanPlacement(fine.side.height_mm, fine.side.valid, options.integration.parallax, k)
+                                        ? PlanPlacement(fine.side.height_mm, fine.side.valid, options.placement_parallax, k)
                                         : PlanPlacement();
+    placed = PlacementDetail(placement, fine.stack.grid.pitch_mm);
     if (fine_height_mm) {
       *fine_height_mm = IntegrateFineRefinedNormals(std::move(fine_fit.normals), fine.side.valid, weights, geometry.valid,
                                                     k, stack.grid.pitch_mm, HasPointLights(stack), options, progress,
@@ -92,7 +94,7 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
   const double fine_seconds = SteadySeconds() - fine_start;
   fine = FineReconstruction();
   fit.times.total_s = SteadySeconds() - start;
-  ReportFitStep(fit, detail + TopViewNormalsDetail(k, camera, fine_seconds), SteadySeconds() - start, report);
+  ReportFitStep(fit, detail + TopViewNormalsDetail(k, camera, fine_seconds) + placed, SteadySeconds() - start, report);
   return fit;
 }
 

@@ -9,7 +9,9 @@
 // top view's photographs with its nearest cluster's lobes (fitting/tiled_fit.h FitPixelRows, the
 // per-pixel normal refinement on), and the map pixel's normal is their average as
 // FitSideWithFineNormals makes it (docs/reconstruction.md, "Refining a tilted capture's normals
-// against the top view").
+// against the top view"). The fine grid reads that view on the face's plane, so each fine pixel is
+// placed on the plan along its camera's rays (StageOptions::placement_parallax; up to half a map
+// pixel at a wide field's edges: docs/reconstruction.md, "A tilted capture's finer grid on the plan").
 //
 // The refined normals give the height its detail only: its wavelengths longer than a few map pixels
 // stay photometric stereo's. The refined normals' own average, integrated, bent a 2048 px velvet
@@ -47,7 +49,8 @@ fitting::ClusterModel ModelForTopViewNormals(const fitting::ClusterModel& model,
 // One band: the fit of FitSide (the clusters and the per-pixel step on the maps' grid, with the
 // facets of `geometry`), then each pixel of `fine` (its stack: the top view's observations on the
 // finer grid, ReconstructSideSupersampled's `keep_fine`) refined as above. `fit.normals` gets their
-// average onto the maps (AverageNormalsOntoMaps, weighted and placed as the reconstruction's),
+// average onto the maps (AverageNormalsOntoMaps, weighted as the reconstruction's and placed along
+// options.placement_parallax by the fine photometric stereo's heights),
 // `fine_height_mm` (not null) the height IntegrateFineRefinedNormals gives them with `geometry`'s
 // height for the long wavelengths. Reports the fit step. `fine` is released before returning.
 fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideReconstruction& geometry,

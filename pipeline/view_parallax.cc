@@ -8,7 +8,7 @@ void SetViewParallax(const Stack& views, const CalibrationResult& calibration, b
                      StageOptions* options) {
   reconstruction::ViewParallax parallax;
   const int chosen = options->photometric_stereo.view >= 0 ? options->photometric_stereo.view : MostVerticalView(views);
-  if (!rectified_on_relief && chosen >= 0 && static_cast<std::size_t>(chosen) < views.views.size()) {
+  if (chosen >= 0 && static_cast<std::size_t>(chosen) < views.views.size()) {
     const Eigen::Vector3d& camera = views.views[static_cast<std::size_t>(chosen)].centre_in_world_mm;
     parallax.camera_x_mm = camera.x();
     parallax.camera_y_mm = camera.y();
@@ -19,6 +19,8 @@ void SetViewParallax(const Stack& views, const CalibrationResult& calibration, b
     // A camera at or below the plane sees no height field: no parallax to take out.
     parallax.enabled = camera.z() > calibration.surface_z_mm;
   }
+  options->placement_parallax = parallax;
+  if (rectified_on_relief) parallax.enabled = false;
   options->integration.parallax = parallax;
   options->photometric_stereo.integration.parallax = parallax;
 }

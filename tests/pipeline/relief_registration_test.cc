@@ -15,6 +15,7 @@
 #include "pipeline/presets.h"
 #include "pipeline/process.h"
 #include "pipeline/relief_registration.h"
+#include "pipeline/side_run.h"
 #include "pipeline/stages.h"
 #include "tests/support/bump_scene.h"
 #include "tests/support/image_shift.h"
@@ -260,6 +261,43 @@ TEST(ReliefRegistration, BandsMeasureTheSheenOnTheReliefAsOneBandDoes) {
       EXPECT_NEAR(mean_of(b), truth_sheen, kSheenTolerance);
     }
   }
+}
+
+// A tilted capture's heights are integrated without the view's parallax (its stack is registered on
+// the relief), but its finer grid reads the top view on the face's plane: those fine pixels are
+// placed on the plan along the top camera's rays (pipeline/view_parallax.h).
+TEST(StagesForSide, ATiltedCapturePlacesTheFinerGridAlongTheTopCamerasRays) {
+  test::TempDir dir;
+  synthetic::SceneTruth scene = testing::BumpScene(48, 36, kPitchMm, kAmplitudeMm, kPeriodMm);
+  synthetic::RigOptions rig_options;
+  rig_options.width = 64;
+  rig_options.height = 48;
+  rig_options.pitch_mm = kPitchMm;
+  rig_options.lights = 3;
+  synthetic::CaptureOptions capture_options;
+  capture_options.format = synthetic::FrameFormat::kExr;
+  capture_options.calibration_frames = false;
+  synthetic::WriteSyntheticCapture(scene, synthetic::MakeRig("oblique", rig_options), capture_options, dir / "c");
+  StageOptions options = OptionsForPreset(Preset::kFast);
+  RunReport report;
+  const PreparedCapture prepared = PrepareCapture(dir / "c" / synthetic::kCaptureSubdir, options, &report);
+
+  const SideStages side = StagesForSide(prepared, "front", options);
+  ASSERT_TRUE(side.tilted_view);
+  EXPECT_FALSE(side.options.integration.parallax.enabled);
+  EXPECT_FALSE(side.options.photometric_stereo.integration.parallax.enabled);
+  const int top = MostVerticalView(side.views);
+  ASSERT_GE(top, 0);
+  EXPECT_EQ(side.options.photometric_stereo.view, top);  // the normals from the top view alone
+  const reconstruction::ViewParallax& placement = side.options.placement_parallax;
+  EXPECT_TRUE(placement.enabled);
+  const Eigen::Vector3d& camera = side.views.views[static_cast<std::size_t>(top)].centre_in_world_mm;
+  EXPECT_DOUBLE_EQ(placement.camera_x_mm, camera.x());
+  EXPECT_DOUBLE_EQ(placement.camera_y_mm, camera.y());
+  EXPECT_DOUBLE_EQ(placement.camera_z_mm, camera.z());
+  EXPECT_DOUBLE_EQ(placement.plane_z_mm, prepared.calibration.surface_z_mm);
+  EXPECT_DOUBLE_EQ(placement.x0_mm, prepared.calibration.grid.x0_mm);
+  EXPECT_DOUBLE_EQ(placement.y1_mm, prepared.calibration.grid.y1_mm);
 }
 
 }  // namespace
