@@ -77,7 +77,9 @@ fitting::FitResult FitSideRefiningTopViewNormals(const Stack& stack, const SideR
     fitting::FitResult fine_fit = fitting::StartPixelMaps(top, fine.stack.grid);
     fitting::PixelTally fine_tally;  // the maps' grid's tally is the one reported
     fitting::FitPixelRows(top, fine.stack, fine_surface, 0, &fine_fit, &fine_tally, progress);
-    // Weighted and placed as ReconstructSideSupersampled averaged the photometric stereo normals.
+    // Weighted as ReconstructSideSupersampled averaged photometric stereo's normals (a tilted
+    // capture's integration has no parallax, so no weights), and placed on the plan along the top
+    // camera's rays, which that average is not for a tilted capture (StageOptions::placement_parallax).
     const Image weights = SurfaceAreaWeights(fine_fit.normals, options.integration.parallax);
     const PlanPlacement placement = options.place_fine_pixels_on_plan
                                         ? PlanPlacement(fine.side.height_mm, fine.side.valid, options.placement_parallax, k)
