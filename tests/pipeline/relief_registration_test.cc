@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <filesystem>
 #include <iostream>
 
 #include "datasets_synthetic/capture_writer.h"
@@ -56,23 +58,29 @@ double WorstPatchShiftPx(const Stack& stack, int top) {
   return worst;
 }
 
+// `scene` rendered by the oblique rig (the top camera and one at about 60 deg) at `width` x
+// `height` camera pixels of kPitchMm, as EXR frames without calibration frames, into dir/c.
+void WriteOnTheObliqueRig(const synthetic::SceneTruth& scene, int width, int height, int lights, std::uint64_t seed,
+                          const std::filesystem::path& dir) {
+  synthetic::RigOptions rig_options;
+  rig_options.width = width;
+  rig_options.height = height;
+  rig_options.pitch_mm = kPitchMm;
+  rig_options.seed = seed;
+  rig_options.lights = lights;
+  synthetic::CaptureOptions capture_options;
+  capture_options.format = synthetic::FrameFormat::kExr;
+  capture_options.calibration_frames = false;
+  synthetic::WriteSyntheticCapture(scene, synthetic::MakeRig("oblique", rig_options), capture_options, dir / "c");
+}
+
 TEST(ReliefRegistration, ObliqueViewRegistersOnTheReliefNotOnlyOnTheFacePlane) {
   test::TempDir dir;
   synthetic::SceneTruth scene = testing::BumpScene(200, 150, kPitchMm, kAmplitudeMm, kPeriodMm);
   for (float& h : scene.height_mm.plane(0)) h += static_cast<float>(kLiftMm);
   testing::PaintRandomPrint(&scene.base_color, 4, 0.15f, 0.7f);
   for (float& s : scene.specular.plane(0)) s = 0.0f;
-  synthetic::RigOptions rig_options;
-  rig_options.width = 320;
-  rig_options.height = 240;
-  rig_options.pitch_mm = kPitchMm;
-  rig_options.seed = 5;
-  rig_options.lights = 6;
-  const synthetic::Rig rig = synthetic::MakeRig("oblique", rig_options);
-  synthetic::CaptureOptions capture_options;
-  capture_options.format = synthetic::FrameFormat::kExr;
-  capture_options.calibration_frames = false;
-  synthetic::WriteSyntheticCapture(scene, rig, capture_options, dir / "c");
+  WriteOnTheObliqueRig(scene, 320, 240, /*lights=*/6, /*seed=*/5, dir.path());
 
   StageOptions options = OptionsForPreset(Preset::kFast);
   RunReport report;
@@ -268,16 +276,8 @@ TEST(ReliefRegistration, BandsMeasureTheSheenOnTheReliefAsOneBandDoes) {
 // placed on the plan along the top camera's rays (pipeline/view_parallax.h).
 TEST(StagesForSide, ATiltedCapturePlacesTheFinerGridAlongTheTopCamerasRays) {
   test::TempDir dir;
-  synthetic::SceneTruth scene = testing::BumpScene(48, 36, kPitchMm, kAmplitudeMm, kPeriodMm);
-  synthetic::RigOptions rig_options;
-  rig_options.width = 64;
-  rig_options.height = 48;
-  rig_options.pitch_mm = kPitchMm;
-  rig_options.lights = 3;
-  synthetic::CaptureOptions capture_options;
-  capture_options.format = synthetic::FrameFormat::kExr;
-  capture_options.calibration_frames = false;
-  synthetic::WriteSyntheticCapture(scene, synthetic::MakeRig("oblique", rig_options), capture_options, dir / "c");
+  WriteOnTheObliqueRig(testing::BumpScene(48, 36, kPitchMm, kAmplitudeMm, kPeriodMm), 64, 48, /*lights=*/3, /*seed=*/1,
+                       dir.path());
   StageOptions options = OptionsForPreset(Preset::kFast);
   RunReport report;
   const PreparedCapture prepared = PrepareCapture(dir / "c" / synthetic::kCaptureSubdir, options, &report);
