@@ -127,7 +127,8 @@ SideRun RunSide(const PreparedCapture& prepared, const std::string& side, const 
   }
   // Frames kept whole by their header (RAW, PNG, JPEG, compressed TIFF) that the decode cache had no
   // room for are read by region on every band read since (capture/capture.h): say so, as a larger
-  // --max-memory keeps them whole. The cache is the capture's, so the count covers earlier sides.
+  // --max-memory keeps them whole. `process` empties the cache and its refusals after each side
+  // (Capture::ReleaseCache), so the count is this side's.
   if (const std::size_t by_region = prepared.capture.frames_read_by_region(); by_region > 0) {
     char detail[240];
     std::snprintf(detail, sizeof detail,
