@@ -9,8 +9,30 @@
 #include "core/parallel.h"
 #include "pipeline/fine_grid.h"
 #include "pipeline/relief_registration.h"
+#include "reconstruction/relief_levelling.h"
 
 namespace u3mscan {
+
+namespace {
+
+// The heights' long wavelengths on the maps' grid (k fine pixels a side): the quadratic that fits
+// the map pixels' mean heights (weighted by their valid share when `fine_valid` is given) plus the
+// rest's Gaussian low-pass of kPlacementReliefSigmaMapPx.
+Image SampleShapeOnMaps(const Image& fine_height_mm, const Image& fine_valid, int k) {
+  const double map_pitch_mm = fine_height_mm.pitch_mm() * k;
+  const Image heights = BlockMean(fine_height_mm, k, map_pitch_mm);
+  Image relief = heights;
+  reconstruction::LevelRelief(reconstruction::Levelling::kQuadratic, &relief, nullptr,
+                              fine_valid.empty() ? Image() : BlockMean(fine_valid, k, map_pitch_mm));
+  Image shape = GaussianBlurPlane(relief, kPlacementReliefSigmaMapPx);
+  auto out = shape.plane(0);
+  const auto all = heights.plane(0);
+  const auto rest = relief.plane(0);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] += all[i] - rest[i];  // + the quadratic
+  return shape;
+}
+
+}  // namespace
 
 PlanPlacement::PlanPlacement(const Image& fine_height_mm, const Image& fine_valid,
                              const reconstruction::ViewParallax& parallax, int k)
@@ -18,9 +40,12 @@ PlanPlacement::PlanPlacement(const Image& fine_height_mm, const Image& fine_vali
   if (!parallax.enabled || fine_height_mm.empty() || !(fine_pitch_mm_ > 0.0)) return;
   const double depth = parallax.camera_z_mm - parallax.plane_z_mm;
   if (!(depth > 0.0)) return;
-  // The relief without its wavelengths longer than kPlacementReliefSigmaMapPx: the integrated
-  // heights drift there (a bowl or a tilt of tens of um, which the top's quantile would read as
-  // depth at the centre), and the sample lies on the face's plane.
+  // The relief without the sample's shape: the integrated heights drift over the map (a bowl or a
+  // tilt of tens of um, which the top's quantile would read as depth at the centre), and the
+  // sample lies on the face's plane. A quadratic over the map (the drift's low orders) is taken
+  // out whole, then what is left of the wavelengths longer than kPlacementReliefSigmaMapPx; a
+  // fabric's own hollows narrower than that keep their depth. On the maps' grid, so that the
+  // blur's kernel stays a few hundred pixels.
   below_face_mm_ = Image(fine_height_mm.width(), fine_height_mm.height(), 1, 0.0f, fine_pitch_mm_);
   const auto h = fine_height_mm.plane(0);
   auto z = below_face_mm_.plane(0);
@@ -34,8 +59,7 @@ PlanPlacement::PlanPlacement(const Image& fine_height_mm, const Image& fine_vali
     return;
   }
   for (std::size_t i = 0; i < z.size(); ++i) z[i] = std::isfinite(h[i]) ? h[i] : static_cast<float>(finite_sum / finite);
-  const Image long_wavelengths =
-      UpsampleLinear(GaussianBlurPlane(BlockMean(below_face_mm_, k_, fine_pitch_mm_ * k_), kPlacementReliefSigmaMapPx), k_);
+  const Image long_wavelengths = UpsampleLinear(SampleShapeOnMaps(below_face_mm_, fine_valid, k_), k_);
   for (std::size_t i = 0; i < z.size(); ++i) z[i] -= long_wavelengths.plane(0)[i];
   const double top = ReliefTopMm(below_face_mm_, fine_valid);
   if (!std::isfinite(top)) {

@@ -25,10 +25,13 @@ namespace u3mscan {
 inline constexpr double kMaxPlanOffsetMapPx = 2.0;
 
 // The fine heights' wavelengths longer than this Gaussian sigma (map pixels) are left out of the
-// depths (PlanPlacement). On the 9 MP plain's truth seen along the rays (throwaway numpy), with a
-// 100 um bowl added to the heights: normals 1.98 deg from the plan with the bowl kept, 0.58 with
-// sigma 16 (the truth's own heights: 0.58; 32 keeps part of a 300 um bowl: 0.75).
-inline constexpr double kPlacementReliefSigmaMapPx = 16.0;
+// depths (PlanPlacement), after a quadratic over the map. The quadratic takes the integration's
+// bowl: on the 9 MP plain's truth seen along the rays (throwaway numpy), with a 100 um bowl added
+// to the heights, the normals read 1.98 deg from the plan with the bowl kept and 0.58 without it.
+// A short sigma takes a fabric's own wide hollows too (a velvet's crushed pile): the 2048 px velvet
+// of the oblique rig at 4x read 0.814 deg with 16 alone, 0.728 with the quadratic and 64
+// (docs/reconstruction.md, "Placing the fine pixels on the plan").
+inline constexpr double kPlacementReliefSigmaMapPx = 64.0;
 
 class PlanPlacement {
  public:
@@ -36,10 +39,11 @@ class PlanPlacement {
   PlanPlacement() = default;
 
   // `fine_height_mm`: the heights of the whole fine grid (k times the maps' grid; integrated, known
-  // up to a constant). Their wavelengths longer than kPlacementReliefSigmaMapPx are taken out (the
-  // sample lies on the face's plane), and the top of the rest (relief_registration.h ReliefTopMm
-  // over `fine_valid`) is put on the parallax's plane, the sample's face (the manifest's thickness
-  // is the sample's highest point).
+  // up to a constant). A quadratic over the map and then their wavelengths longer than
+  // kPlacementReliefSigmaMapPx are taken out (the sample lies on the face's plane; `fine_valid`, 1
+  // channel of the same size or empty, weighs the quadratic's fit), and the top of the rest
+  // (relief_registration.h ReliefTopMm over `fine_valid`) is put on the parallax's plane, the
+  // sample's face (the manifest's thickness is the sample's highest point).
   // `parallax` is the maps' one (the same region and plane). Off when the parallax is off or
   // there is no height.
   PlanPlacement(const Image& fine_height_mm, const Image& fine_valid, const reconstruction::ViewParallax& parallax,
