@@ -25,6 +25,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     SideRunOptions run;
     bool follow_fibres = false;
     bool one_pixel_prior = false;
+    bool normal_then_lobe = false;
   };
   auto args = std::make_shared<Args>();
   sub.add_option("CAPTURE", args->capture, "Capture folder (with capture.json)")->required();
@@ -56,6 +57,9 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
   sub.add_flag("--one-pixel-prior", args->one_pixel_prior,
                "Regularise every pixel toward its cluster with one prior std (0.1), not with the spread each "
                "cluster's samples show (for comparisons; docs/fitting.md, Per-pixel spread from the samples)");
+  sub.add_flag("--normal-then-lobe", args->normal_then_lobe,
+               "Refine each pixel's normal at its cluster's lobe and then its own lobe on that normal, not "
+               "the two in one solve (for comparisons; docs/fitting.md, Normal and lobe together)");
   sub.footer(
       "Runs calibration and reconstruction first, as `process` does (a tilted camera's relief\n"
       "registration, a finer grid where the camera resolves one, bands past --max-memory). Writes\n"
@@ -69,6 +73,7 @@ U3MSCAN_REGISTER_COMMAND(kFitCommand, "fit", "Capture -> fitted Principled param
     if (!args->fit_mode.empty()) stages.fit.mode = fitting::ParseFitMode(args->fit_mode);
     stages.follow_fibres = args->follow_fibres;
     if (args->one_pixel_prior) stages.fit.pixel_prior_from_samples = false;
+    if (args->normal_then_lobe) stages.fit.refine_normal_with_lobe = false;
     SetDecodeCacheBudget(args->run.max_memory_gib, &stages);
     SideRunOptions run_options = args->run;
     run_options.hold_out_lights = SplitLightIds(args->hold_out_lights);

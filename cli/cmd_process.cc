@@ -92,6 +92,9 @@ U3MSCAN_REGISTER_COMMAND(kProcessCommand, "process", "Capture folder(s) -> compl
   sub.add_flag("--one-pixel-prior", args->options.one_pixel_prior,
                "Regularise every pixel toward its cluster with one prior std (0.1), not with the spread each "
                "cluster's samples show (for comparisons; docs/fitting.md, Per-pixel spread from the samples)");
+  sub.add_flag("--normal-then-lobe", args->options.normal_then_lobe,
+               "Refine each pixel's normal at its cluster's lobe and then its own lobe on that normal, not "
+               "the two in one solve (for comparisons; docs/fitting.md, Normal and lobe together)");
   sub.add_option("--level", args->options.levelling,
                  "The sample's low-order shape taken out of the height map: none | plane (a tilt) | "
                  "quadratic (a tilt and a bowl: glossy weaves' normals lean toward the camera into a bowl; also removes a "

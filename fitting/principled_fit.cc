@@ -43,6 +43,12 @@ constexpr double kPixelStep = 1e-4;
 constexpr double kNormalStep = 1e-4;
 constexpr double kNormalDamping = 1e-3;
 constexpr double kNormalConvergedTilt = 1e-5;
+// The joint normal-and-lobe step (RefineNormalAndLobe) has converged below these steps: a tilt of
+// 1e-3 (0.06 deg) and 0.003 in the lobe. Tighter (RefineNormal's 1e-5, 1e-4) ran every step on
+// most pixels: the finer grid's normal refinement took 110 s instead of 69 s on a 9 MP plain scan
+// for normals 0.874 deg either way (docs/fitting.md, "Normal and lobe together").
+constexpr double kJointConvergedTilt = 1e-3;
+constexpr double kJointConvergedLobe = 3e-3;
 // Step halving of the per-pixel Gauss-Newton step stops below this fraction (2 tries: a pixel
 // whose cost does not drop within them keeps the cluster value; this is the cheap stage).
 constexpr double kMinStepScale = 0.3;
@@ -349,6 +355,18 @@ bool EnoughMeasurements(const FitContext& context, const LocalObservation* obs, 
          context.options->min_observations;
 }
 
+// A pixel's world observations in the shading frame of normal `n` (turned by `turn_deg`, the
+// cluster's turn on the pixel's own) written to `buffer`; returns how many are usable there.
+int LocalizeObservations(std::span<const WorldObservation> world, const Eigen::Vector3d& n, double turn_deg,
+                         double min_cos, LocalObservation* buffer) {
+  const ShadingFrame frame = MakeShadingFrame(n, turn_deg);
+  int count = 0;
+  for (const WorldObservation& w : world) {
+    if (ToLocalObservation(w, frame, min_cos, &buffer[count])) ++count;
+  }
+  return count;
+}
+
 // RefineNormal's buffers, one per worker: grown to the stack's observation count once, then reused
 // (no allocation per pixel).
 struct NormalRefinementScratch {
@@ -382,16 +400,10 @@ Eigen::Vector3d RefineNormal(const FitContext& context, std::size_t index, const
   const Eigen::Vector3d& b0 = axes.bitangent;
   const int gathered = GatherWorldObservations(context, index, scratch.world);
   const std::span<const WorldObservation> world(scratch.world.data(), gathered);
-  // The observations in the frame of normal `n` (the cluster's turn on the pixel's own); returns
-  // their number.
+  // The observations in the frame of normal `n`; returns their number.
   const double turn_deg = rotation_deg + PixelTurn(context, index);
   auto localize = [&](const Eigen::Vector3d& n) {
-    const ShadingFrame frame = MakeShadingFrame(n, turn_deg);
-    int count = 0;
-    for (const WorldObservation& w : world) {
-      if (ToLocalObservation(w, frame, options.min_cos, &buffer[count])) ++count;
-    }
-    return count;
+    return LocalizeObservations(world, n, turn_deg, options.min_cos, buffer);
   };
   // `n` with `buffer` and `*count` set for it (normalised again, as GatherPixelWithNormal does).
   auto finish = [&](const Eigen::Vector3d& n) {
@@ -504,6 +516,39 @@ int PixelFeatures(const FitContext& context, std::size_t index, PixelBuffers& bu
   return count;
 }
 
+// The lobe parameters the per-pixel step refines (roughness, specular: RefinedPerPixel, with a
+// prior std of at least kMinPixelPriorStd) and their prior weights 1 / std^2.
+struct PixelLobe {
+  int parameter[kMaxPixelParameters];
+  double prior_weight[kMaxPixelParameters];
+  int count = 0;
+};
+PixelLobe PixelLobeParameters(const FitOptions& options, const ParameterMask& measured, const ParameterVector& prior_std) {
+  PixelLobe lobe;
+  for (int parameter : {kRoughness, kSpecular}) {
+    if (!RefinedPerPixel(options, measured, parameter) || !(prior_std[parameter] >= kMinPixelPriorStd)) continue;
+    lobe.prior_weight[lobe.count] = 1.0 / (prior_std[parameter] * prior_std[parameter]);
+    lobe.parameter[lobe.count++] = parameter;
+  }
+  return lobe;
+}
+
+// Gauss-Newton's system from forward-difference columns: J^T J into the top-left `n` x `n` of `*h`
+// and J^T r into the first `n` entries of `*g` (column j of J at jac + j * m, m residuals `r`).
+template <typename Matrix, typename Vector>
+void AccumulateGaussNewton(const double* jac, const double* r, std::size_t m, int n, Matrix* h, Vector* g) {
+  for (int a = 0; a < n; ++a) {
+    for (int b = 0; b <= a; ++b) {
+      double sum = 0.0;
+      for (std::size_t i = 0; i < m; ++i) sum += jac[a * m + i] * jac[b * m + i];
+      (*h)(a, b) = (*h)(b, a) = sum;
+    }
+    double sum = 0.0;
+    for (std::size_t i = 0; i < m; ++i) sum += jac[a * m + i] * r[i];
+    (*g)(a) = sum;
+  }
+}
+
 // Per-pixel refinement of roughness / specular toward the pixel's own data, regularised toward the
 // cluster value with prior std `prior_std[parameter]` (a parameter whose prior std is below
 // kMinPixelPriorStd keeps the cluster value). Damped Gauss-Newton with forward differences;
@@ -514,14 +559,10 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
                 const ParameterVector& prior_std, double luminance_start, const ParameterVector& cluster,
                 ParameterVector& params, std::vector<double>& r0, std::vector<double>& r1, std::vector<double>& jac,
                 Eigen::Vector3d* color, ParameterVector* kept_sd) {
-  int index[kMaxPixelParameters];
-  double prior_w[kMaxPixelParameters];
-  int k = 0;
-  for (int parameter : {kRoughness, kSpecular}) {
-    if (!RefinedPerPixel(options, measured, parameter) || !(prior_std[parameter] >= kMinPixelPriorStd)) continue;
-    prior_w[k] = 1.0 / (prior_std[parameter] * prior_std[parameter]);
-    index[k++] = parameter;
-  }
+  const PixelLobe refined = PixelLobeParameters(options, measured, prior_std);
+  const int* index = refined.parameter;
+  const double* prior_w = refined.prior_weight;
+  const int k = refined.count;
   const PixelCostSettings settings = CostSettingsFor(options, cluster, measured, luminance_start);
   if (k == 0) {
     *color = SolveBaseColor(params, obs, settings);
@@ -553,15 +594,9 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     }
     h.setIdentity();
     Vector2 g = Vector2::Zero();
+    AccumulateGaussNewton(jac.data(), r0.data(), m, k, &h, &g);
     for (int a = 0; a < k; ++a) {
-      for (int b = 0; b <= a; ++b) {
-        double s = 0.0;
-        for (std::size_t i = 0; i < m; ++i) s += jac[a * m + i] * jac[b * m + i];
-        h(a, b) = h(b, a) = s;
-      }
-      double s = 0.0;
-      for (std::size_t i = 0; i < m; ++i) s += jac[a * m + i] * r0[i];
-      g(a) = s + prior_w[a] * (params[index[a]] - cluster[index[a]]);
+      g(a) += prior_w[a] * (params[index[a]] - cluster[index[a]]);
       h(a, a) += prior_w[a];
     }
     // No step where even the best case cannot pin the value down (cheap stage: skip early).
@@ -611,6 +646,146 @@ int RefinePixel(std::span<const LocalObservation> obs, const FitOptions& options
     *color = start_color;
   }
   return kept;
+}
+
+// The pixel's normal and its lobe together (FitOptions::refine_normal_with_lobe): damped
+// Gauss-Newton on the two tilts of the normal in the tangent plane of `n_start` (the normal
+// RefineNormal gave at the cluster's lobe) and on the lobe parameters RefinePixel refines, each
+// regularised toward the cluster's value with the cluster's prior std. Forward differences as in
+// both (the tilt columns turn the observations into the trial normal's frame). Succeeds when every
+// lobe parameter's posterior std, the tilts marginalised and the covariance inflated by the
+// pixel's reduced chi^2, is below pixel_max_std: then `*params` holds the pixel's lobe, `*color`
+// its closed-form base colour, `*kept_sd` the lobe's std, and the joint normal is returned.
+// Otherwise returns `n_start` with `*params` untouched. Either way `buffer` ends holding the pixel's
+// usable observations in the returned normal's frame and `*count` their number.
+Eigen::Vector3d RefineNormalAndLobe(const FitContext& context, std::size_t index, const Eigen::Vector3d& n_start,
+                                    const ParameterMask& measured, const ParameterVector& prior_std,
+                                    const ParameterVector& cluster, double rotation_deg,
+                                    const PixelCostSettings& settings, LocalObservation* buffer,
+                                    NormalRefinementScratch& scratch, int* count, ParameterVector* params,
+                                    Eigen::Vector3d* color, ParameterVector* kept_sd, bool* succeeded) {
+  const FitOptions& options = *context.options;
+  *succeeded = false;
+  constexpr int kMaxUnknowns = 2 + kMaxPixelParameters;
+  const PixelLobe refined = PixelLobeParameters(options, measured, prior_std);
+  const int* lobe = refined.parameter;
+  const double* prior_w = refined.prior_weight;
+  const int k = refined.count;
+  const ShadingFrame axes = MakeShadingFrame(n_start);
+  const int gathered = GatherWorldObservations(context, index, scratch.world);
+  const std::span<const WorldObservation> world(scratch.world.data(), gathered);
+  const double turn_deg = rotation_deg + PixelTurn(context, index);
+  auto localize = [&](const Eigen::Vector3d& n) {
+    return LocalizeObservations(world, n, turn_deg, options.min_cos, buffer);
+  };
+  auto normal_at = [&](const Eigen::Vector2d& tilt) {
+    return (n_start + tilt(0) * axes.tangent + tilt(1) * axes.bitangent).normalized();
+  };
+  const int count0 = localize(n_start);
+  *count = count0;
+  if (k == 0 || !EnoughMeasurements(context, buffer, count0) || count0 < 2 * kMaxUnknowns) return n_start;
+  const std::size_t m = 3 * static_cast<std::size_t>(count0);
+  const int unknowns = 2 + k;
+  scratch.residuals.resize((2 + kMaxUnknowns) * m);
+  double* r = scratch.residuals.data();
+  double* trial = r + m;
+  double* jac = r + 2 * m;  // column j at jac + j * m
+  // Cost (data plus the lobe's prior) at tilt and lobe `p`; false when the set of usable
+  // observations changes (as RefineNormal).
+  auto eval = [&](const Eigen::Vector2d& tilt, const ParameterVector& p, double* out, double* cost,
+                  Eigen::Vector3d* c_out) {
+    if (localize(normal_at(tilt)) != count0) return false;
+    double c = PixelResiduals(p, std::span<const LocalObservation>(buffer, count0), settings, out, c_out);
+    for (int a = 0; a < k; ++a) c += 0.5 * prior_w[a] * (p[lobe[a]] - cluster[lobe[a]]) * (p[lobe[a]] - cluster[lobe[a]]);
+    *cost = c;
+    return std::isfinite(c);
+  };
+  using Matrix = Eigen::Matrix<double, kMaxUnknowns, kMaxUnknowns>;
+  using Vector = Eigen::Matrix<double, kMaxUnknowns, 1>;
+  Eigen::Vector2d tilt = Eigen::Vector2d::Zero();
+  ParameterVector p = *params;
+  double cost = 0.0;
+  Eigen::Vector3d c_color;
+  auto give_up = [&]() {
+    *count = localize(n_start);
+    return n_start;
+  };
+  if (!eval(tilt, p, r, &cost, &c_color)) return give_up();
+  const double max_tilt = std::tan(options.normal_max_change_deg * M_PI / 180.0);
+  Matrix h = Matrix::Identity();
+  bool linearised = false;
+  for (int iteration = 0; iteration < options.pixel_joint_iterations; ++iteration) {
+    bool ok = true;
+    double unused = 0.0;
+    for (int j = 0; j < unknowns && ok; ++j) {
+      Eigen::Vector2d t = tilt;
+      ParameterVector q = p;
+      double step = kNormalStep;
+      if (j < 2) {
+        t(j) += step;
+      } else {
+        step = q[lobe[j - 2]] + kPixelStep <= 1.0 ? kPixelStep : -kPixelStep;
+        q[lobe[j - 2]] += step;
+      }
+      ok = eval(t, q, trial, &unused, nullptr);
+      for (std::size_t i = 0; ok && i < m; ++i) jac[j * m + i] = (trial[i] - r[i]) / step;
+    }
+    if (!ok) break;
+    h.setIdentity();
+    Vector g = Vector::Zero();
+    AccumulateGaussNewton(jac, r, m, unknowns, &h, &g);
+    for (int a = 0; a < k; ++a) {
+      g(2 + a) += prior_w[a] * (p[lobe[a]] - cluster[lobe[a]]);
+      h(2 + a, 2 + a) += prior_w[a];
+    }
+    linearised = true;
+    Matrix damped = h;
+    for (int a = 0; a < 2; ++a) damped(a, a) *= 1.0 + kNormalDamping;
+    const Vector delta = -damped.ldlt().solve(g);
+    if (!delta.allFinite()) break;
+    bool accepted = false;
+    for (double scale = 1.0; scale >= kMinStepScale && !accepted; scale *= 0.5) {
+      Eigen::Vector2d t = tilt + scale * delta.head<2>();
+      if (t.norm() > max_tilt) t *= max_tilt / t.norm();
+      ParameterVector q = p;
+      for (int a = 0; a < k; ++a) q[lobe[a]] = std::clamp(q[lobe[a]] + scale * delta(2 + a), 0.0, 1.0);
+      double candidate = 0.0;
+      Eigen::Vector3d candidate_color;
+      if (eval(t, q, trial, &candidate, &candidate_color) && candidate < cost) {
+        tilt = t;
+        p = q;
+        cost = candidate;
+        c_color = candidate_color;
+        std::copy(trial, trial + m, r);
+        accepted = true;
+      }
+    }
+    double lobe_step = 0.0;
+    for (int a = 0; a < k; ++a) lobe_step = std::max(lobe_step, std::abs(delta(2 + a)));
+    if (!accepted || (delta.head<2>().norm() < kJointConvergedTilt && lobe_step < kJointConvergedLobe)) break;
+  }
+  if (!linearised) return give_up();
+  // The lobe's std with the tilts marginalised: the lobe block of the inverse of the last
+  // linearisation, inflated by the reduced chi^2 (as RefinePixel).
+  Matrix used = Matrix::Identity();
+  used.topLeftCorner(unknowns, unknowns) = h.topLeftCorner(unknowns, unknowns);
+  const Matrix covariance = used.inverse();
+  double chi2 = 0.0;
+  for (std::size_t i = 0; i < m; ++i) chi2 += r[i] * r[i];
+  const double inflation = std::max(1.0, chi2 / static_cast<double>(m - unknowns));
+  ParameterVector sd = *kept_sd;
+  for (int a = 0; a < k; ++a) {
+    const double s = std::sqrt(std::max(0.0, covariance(2 + a, 2 + a)) * inflation);
+    if (!(std::isfinite(s) && s < options.pixel_max_std)) return give_up();
+    sd[lobe[a]] = s;
+  }
+  *params = p;
+  *color = c_color;
+  *kept_sd = sd;
+  *succeeded = true;
+  const Eigen::Vector3d n = normal_at(tilt);
+  *count = localize(n);
+  return n;
 }
 
 // ClusterFit::pixel_prior_std of a cluster at its final `params` (empirical Bayes): how far its
@@ -685,7 +860,7 @@ bool FitOptions::Check() const {
          min_cos >= 0.0 && min_cos < 1.0 && min_observations >= 1 && max_iterations >= 1 && luminance_passes >= 1 &&
          mismatch_relative_rms > 0.0 && unusable_relative_rms >= mismatch_relative_rms && pixel_prior_std > 0.0 && pixel_max_std > 0.0 && pixel_min_specular_fraction >= 0.0 &&
          pixel_min_specular_fraction < 1.0 && pixel_iterations >= 0 && normal_refinement_max_passes >= 0 && normal_refinement_tolerance_deg >= 0.0 &&
-         normal_iterations >= 1 && pixel_normal_iterations >= 1 &&
+         normal_iterations >= 1 && pixel_normal_iterations >= 1 && pixel_joint_iterations >= 1 &&
          normal_max_change_deg > 0.0 && normal_max_change_deg < 90.0 && min_highlight_share >= 0.0 &&
          min_highlight_share <= 1.0 && highlight_lobe_fraction > 0.0 && highlight_lobe_fraction < 1.0 &&
          unreliable_pixel_share >= 0.0 && unreliable_pixel_share < 1.0;
@@ -1116,15 +1291,25 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
                                                  normal_scratch, &count);
           for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
         }
-        const std::span<const LocalObservation> obs(buffers.observations.data(), count);
         ParameterVector params = cluster_params[c];
         Eigen::Vector3d color;
         if (options.mode == FitMode::kPerPixel && feature[kAppearanceFeatureCount - 1] > gloss_threshold &&
             count >= 2 * kMaxPixelParameters) {
           ParameterVector kept_sd;
           kept_sd.fill(-1.0);
-          if (RefinePixel(obs, options, cluster_measured[c], model.clusters[c].pixel_prior_std, cluster_luminance[c],
-                          cluster_params[c], params, r0, r1, jac, &color, &kept_sd) > 0) {
+          bool joint = false;
+          if (refine_normals && options.refine_normal_with_lobe) {
+            const Eigen::Vector3d start(result.normals.at(0, row0 + row, col), result.normals.at(1, row0 + row, col),
+                                        result.normals.at(2, row0 + row, col));
+            const Eigen::Vector3d n = RefineNormalAndLobe(
+                context, index, start, cluster_measured[c], model.clusters[c].pixel_prior_std, cluster_params[c],
+                rotation_deg, CostSettingsFor(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]),
+                buffers.observations.data(), normal_scratch, &count, &params, &color, &kept_sd, &joint);
+            for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
+          }
+          const std::span<const LocalObservation> obs(buffers.observations.data(), count);
+          if (joint || RefinePixel(obs, options, cluster_measured[c], model.clusters[c].pixel_prior_std, cluster_luminance[c],
+                                   cluster_params[c], params, r0, r1, jac, &color, &kept_sd) > 0) {
             ++local_refined;
             // The pixel's own uncertainty replaces the cluster's in the pooled uncertainty.
             for (int i = 0; i < kFitParameterCount; ++i) {
@@ -1134,6 +1319,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
             }
           }
         } else {
+          const std::span<const LocalObservation> obs(buffers.observations.data(), count);
           color = SolveBaseColor(params, obs, CostSettingsFor(options, params, cluster_measured[c], cluster_luminance[c]));
         }
         for (int ch = 0; ch < 3; ++ch) {

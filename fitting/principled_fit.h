@@ -154,6 +154,16 @@ struct FitOptions {
   // most pixel_normal_iterations damped Gauss-Newton steps. Off: FitResult::normals stays empty.
   bool refine_pixel_normals = true;
   int pixel_normal_iterations = 3;
+  // Where the per-pixel step refines the lobe (kPerPixel, a pixel that shows a highlight) and
+  // refine_pixel_normals is on: the pixel's normal and lobe (roughness, and specular with
+  // refine_specular_per_pixel) in one damped Gauss-Newton of at most pixel_joint_iterations steps,
+  // started from the normal refined at the cluster's lobe. A thread whose lobe differs from its
+  // cluster's (denim's warp, roughness 0.74-0.96) otherwise keeps a normal bent to explain the
+  // cluster's lobe, and its lobe then fits that bent normal (docs/fitting.md, "Normal and lobe
+  // together"). The joint values are kept where every lobe parameter's posterior std (the normal's
+  // tilts marginalised) is below pixel_max_std, else the two steps one after the other as before.
+  bool refine_normal_with_lobe = true;
+  int pixel_joint_iterations = 6;
   // Threads: clusters and pixels run through core/parallel.h (SetThreadCount).
 
   bool Check() const;

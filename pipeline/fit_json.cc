@@ -117,6 +117,7 @@ json FitResultToJson(const fitting::FitResult& result) {
             {"fit_anisotropy_rotation", o.fit_anisotropy_rotation},
             {"pixel_prior_std", FiniteOrNull<json>(o.pixel_prior_std)},
             {"pixel_prior_from_samples", o.pixel_prior_from_samples},
+            {"refine_normal_with_lobe", o.refine_normal_with_lobe},
             {"mode", fitting::FitModeName(o.mode)},
             {"seed", o.clustering.seed}}}};
 }

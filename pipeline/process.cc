@@ -218,6 +218,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
   stages.refine_top_view_normals = !options.no_top_view_refinement;
   stages.follow_fibres = stages.follow_fibres || options.follow_fibres;
   if (options.one_pixel_prior) stages.fit.pixel_prior_from_samples = false;
+  if (options.normal_then_lobe) stages.fit.refine_normal_with_lobe = false;
   report.options = {{"cast_shadows", stages.mark_cast_shadows}, {"preset", report.preset}, {"schema", options.schema}, {"package", options.package},
                     {"fit_mode", fitting::FitModeName(stages.fit.mode)},
                     {"debug_maps", options.debug_maps},
@@ -234,6 +235,7 @@ ProcessResult ProcessCapture(const CaptureJob& job, const ProcessOptions& option
                     {"top_view_refinement", stages.refine_top_view_normals},
                     {"follow_fibres", stages.follow_fibres},
                     {"pixel_prior_from_samples", stages.fit.pixel_prior_from_samples},
+                    {"refine_normal_with_lobe", stages.fit.refine_normal_with_lobe},
                     {"hold_out_lights", options.hold_out_lights}};
   if (options.dpi) report.options["dpi"] = *options.dpi;
 

@@ -53,6 +53,9 @@ struct ProcessOptions {
   // One prior std toward the cluster's value for every pixel (fitting::FitOptions::pixel_prior_std)
   // instead of each cluster's own spread (pixel_prior_from_samples off; for comparisons).
   bool one_pixel_prior = false;
+  // Refine each pixel's normal at its cluster's lobe and then its lobe on that normal, not the two
+  // together (fitting::FitOptions::refine_normal_with_lobe off; for comparisons).
+  bool normal_then_lobe = false;
   // Light ids (the manifest's) left out of reconstruction and fit and re-rendered afterwards: their
   // error against the photographs goes to the report (pipeline/held_out_lights.h), in one band or
   // in bands (tiled_side.h).

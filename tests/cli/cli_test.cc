@@ -263,6 +263,23 @@ TEST_F(Cli, FitAndProcessTakeOnePixelPriorWhenAsked) {
   EXPECT_EQ(process_prior("process_own", ""), true);
 }
 
+// `fit --normal-then-lobe` and `process --normal-then-lobe`: each pixel's normal and lobe refined
+// one after the other; by default together, and fit.json and report.json say which.
+TEST_F(Cli, FitAndProcessRefineTheNormalWithTheLobeUnlessAsked) {
+  ASSERT_EQ(U3mscan("synth --scene plain --rig near --size 48x48 --no-calibration --format tiff -o " + Path("plain")).exit_code, 0);
+  auto fit_option = [&](const std::string& out, const std::string& extra) {
+    const RunResult run = U3mscan("fit " + Path("plain/capture") + " -o " + Path(out) + extra);
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    return ReadJson(out + "/fit.json")["options"]["refine_normal_with_lobe"];
+  };
+  EXPECT_EQ(fit_option("apart", " --normal-then-lobe"), false);
+  EXPECT_EQ(fit_option("together", ""), true);
+  const RunResult run = U3mscan("process " + Path("plain/capture") + " -o " + Path("process_apart") +
+                                " --preset fast --normal-then-lobe");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_EQ(ReadJson("process_apart/report.json")["options"]["refine_normal_with_lobe"], false);
+}
+
 // `fit` runs what `process` runs before its fit (pipeline/side_run.h): on a tilted camera at twice
 // the maps' dpi, the relief registration and the finer grid's facets, so both write the same
 // parameter maps; in bands past --max-memory; with the held-out lights' error in fit.json. Before
