@@ -1281,10 +1281,12 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
           count = GatherPixelWithNormal(context, index, GeometryNormal(context, index), rotation_deg,
                                         buffers.observations.data(), nullptr);
         }
+        // The cost at the cluster's parameters: the normal's refinements and, where the pixel keeps
+        // them, its colour solve.
+        const PixelCostSettings settings = CostSettingsFor(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]);
         if (refine_normals) {
           // The pixel's normal with the full model at its cluster's parameters (as the cluster
           // samples' in FitClusterModel), then its colour and own parameters on that normal.
-          const PixelCostSettings settings = CostSettingsFor(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]);
           // It leaves the pixel's observations in the refined normal's frame in the buffer.
           const Eigen::Vector3d n = RefineNormal(context, index, cluster_params[c], rotation_deg, settings,
                                                  options.pixel_normal_iterations, buffers.observations.data(),
@@ -1303,8 +1305,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
                                         result.normals.at(2, row0 + row, col));
             const Eigen::Vector3d n = RefineNormalAndLobe(
                 context, index, start, cluster_measured[c], model.clusters[c].pixel_prior_std, cluster_params[c],
-                rotation_deg, CostSettingsFor(options, cluster_params[c], cluster_measured[c], cluster_luminance[c]),
-                buffers.observations.data(), normal_scratch, &count, &params, &color, &kept_sd, &joint);
+                rotation_deg, settings, buffers.observations.data(), normal_scratch, &count, &params, &color, &kept_sd, &joint);
             for (int ch = 0; ch < 3; ++ch) result.normals.at(ch, row0 + row, col) = static_cast<float>(n(ch));
           }
           const std::span<const LocalObservation> obs(buffers.observations.data(), count);
@@ -1320,7 +1321,7 @@ void FitPixelRows(const ClusterModel& model, const Stack& band, const SurfaceGeo
           }
         } else {
           const std::span<const LocalObservation> obs(buffers.observations.data(), count);
-          color = SolveBaseColor(params, obs, CostSettingsFor(options, params, cluster_measured[c], cluster_luminance[c]));
+          color = SolveBaseColor(params, obs, settings);  // params are the cluster's here
         }
         for (int ch = 0; ch < 3; ++ch) {
           const double v = std::isfinite(color(ch)) ? std::clamp(color(ch), 0.0, 1.0) : 0.0;
